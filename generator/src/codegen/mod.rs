@@ -1,0 +1,203 @@
+//! Code generation: model → one `TokenStream` per module → prettyplease →
+//! files of a `no_std` crate.
+
+pub mod header;
+mod lib_rs;
+mod manifest;
+mod model_rs;
+pub mod splice;
+pub mod write;
+
+use crate::discretize::{auto_substeps, Envelope, SubstepChoice, SubstepError};
+use crate::ir::ModelIr;
+use crate::model::Model;
+use proc_macro2::TokenStream;
+use std::path::PathBuf;
+
+/// Floating-point type of the generated code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Float {
+    #[default]
+    F64,
+    F32,
+}
+
+impl Float {
+    pub fn name(self) -> &'static str {
+        match self {
+            Float::F64 => "f64",
+            Float::F32 => "f32",
+        }
+    }
+}
+
+/// Everything that shapes a generated crate besides the model.
+#[derive(Clone, Debug)]
+pub struct GenerateOptions {
+    /// MPC horizon N (samples).
+    pub horizon: usize,
+    /// Sample rate in Hz (DT = 1/rate).
+    pub rate_hz: f64,
+    /// RK4 substeps per sample; `None` chooses them automatically.
+    pub substeps: Option<usize>,
+    pub float: Float,
+    /// Crate name; default: the model name made into a Rust identifier.
+    pub crate_name: Option<String>,
+    /// Operating envelope for the automatic substep rule.
+    pub envelope: Envelope,
+}
+
+impl Default for GenerateOptions {
+    fn default() -> Self {
+        Self {
+            horizon: 30,
+            rate_hz: 30.0,
+            substeps: None,
+            float: Float::F64,
+            crate_name: None,
+            envelope: Envelope::default(),
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GenerateError {
+    #[error("--{option}: {message}")]
+    InvalidOption { option: &'static str, message: String },
+    #[error("choosing the substep count: {0}")]
+    Substeps(#[from] SubstepError),
+    #[error("template: {0}")]
+    Template(String),
+}
+
+/// The files of a generated crate, in memory.
+pub struct GeneratedCrate {
+    pub crate_name: String,
+    pub substeps: usize,
+    pub substep_choice: Option<SubstepChoice>,
+    pub files: Vec<(PathBuf, String)>,
+}
+
+fn invalid(option: &'static str, message: impl Into<String>) -> GenerateError {
+    GenerateError::InvalidOption {
+        option,
+        message: message.into(),
+    }
+}
+
+/// The model name as a crate name: lowercase `[a-z0-9_]`, not starting with a digit.
+pub fn default_crate_name(model_name: &str) -> String {
+    let mut s: String = model_name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if s.is_empty() || s.starts_with(|c: char| c.is_ascii_digit()) {
+        s.insert_str(0, "model_");
+    }
+    s
+}
+
+impl GenerateOptions {
+    pub fn validate(&self) -> Result<(), GenerateError> {
+        if !(1..=1000).contains(&self.horizon) {
+            return Err(invalid(
+                "horizon",
+                format!("must be between 1 and 1000 samples, got {}", self.horizon),
+            ));
+        }
+        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 100_000.0) {
+            return Err(invalid(
+                "rate",
+                format!(
+                    "must be a positive sample rate in Hz (at most 100000), got {}",
+                    self.rate_hz
+                ),
+            ));
+        }
+        if let Some(m) = self.substeps {
+            if !(1..=10_000).contains(&m) {
+                return Err(invalid("substeps", format!("must be between 1 and 10000, got {m}")));
+            }
+        }
+        if let Some(name) = &self.crate_name {
+            let ok = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+                && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+            if !ok {
+                return Err(invalid("crate-name", format!("'{name}' is not a valid crate name")));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn format_file(tokens: TokenStream, what: &str) -> Result<String, GenerateError> {
+    let file: syn::File = syn::parse2(tokens)
+        .map_err(|e| GenerateError::Template(format!("{what}: emitted tokens do not parse: {e}")))?;
+    Ok(prettyplease::unparse(&file))
+}
+
+/// Generate the crate for `model` in memory (nothing is written).
+pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCrate, GenerateError> {
+    options.validate()?;
+    let ir = ModelIr::new(model);
+    let dt = 1.0 / options.rate_hz;
+    let (substeps, substep_choice) = match options.substeps {
+        Some(m) => (m, None),
+        None => {
+            let choice = auto_substeps(&ir, dt, &options.envelope)?;
+            (choice.substeps, Some(choice))
+        }
+    };
+    let crate_name = options
+        .crate_name
+        .clone()
+        .unwrap_or_else(|| default_crate_name(&model.name));
+    let head = header::lines(model, options, substeps);
+    let rs_header = header::rust(&head);
+
+    let dims = splice::specialise_dims(options.float.name(), &lib_rs::dims_values(&ir, options, substeps))
+        .map_err(GenerateError::Template)?;
+    let (model_tokens, used_math) = model_rs::emit(&ir);
+    let mut files = vec![
+        (
+            PathBuf::from("Cargo.toml"),
+            format!("{}{}", header::toml(&head), manifest::cargo_toml(&crate_name, model)),
+        ),
+        (
+            PathBuf::from("README.md"),
+            manifest::readme(&crate_name, model, options, substeps, &head),
+        ),
+        (
+            PathBuf::from("src/lib.rs"),
+            rs_header.clone() + &format_file(lib_rs::emit(model, &ir), "lib.rs")?,
+        ),
+        (
+            PathBuf::from("src/dims.rs"),
+            rs_header.clone() + &prettyplease::unparse(&dims),
+        ),
+        (
+            PathBuf::from("src/model.rs"),
+            rs_header.clone() + &format_file(model_tokens, "model.rs")?,
+        ),
+        (
+            PathBuf::from("src/math.rs"),
+            rs_header.clone() + &prettyplease::unparse(&splice::math(&used_math)),
+        ),
+    ];
+    files.push((
+        PathBuf::from("src/rk4.rs"),
+        rs_header + &prettyplease::unparse(&splice::template(splice::RK4_RS)),
+    ));
+    Ok(GeneratedCrate {
+        crate_name,
+        substeps,
+        substep_choice,
+        files,
+    })
+}

@@ -1,0 +1,170 @@
+//! Emits the `model` module: ẋ = f(x, u), its Jacobians and the stage
+//! sensitivity used by the spliced RK4, as straight-line code.
+
+use crate::ir::ModelIr;
+use crate::symbolic::emit::local_ident;
+use crate::symbolic::{Emitter, Id};
+use proc_macro2::TokenStream;
+use quote::{format_ident, quote};
+use std::collections::BTreeSet;
+
+/// Locals the emitted functions use besides the model's variables.
+const RESERVED: &[&str] = &["x", "u", "s", "f", "ds", "j", "fx", "fu", "Real", "NX", "NU", "NZ"];
+
+/// Bindings `let ([x, y, …], [u_vz, …]) = (*x, *u);` and the variable tokens.
+fn bind_variables(ir: &ModelIr) -> (TokenStream, Vec<TokenStream>) {
+    let names: Vec<String> = ir.state_names.iter().chain(&ir.input_names).cloned().collect();
+    let idents: Vec<_> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            // The parameters x and u are destructured in one statement, so a
+            // state named `x` may keep its name.
+            let reserved: Vec<&str> = RESERVED.iter().copied().filter(|r| *r != "x" && *r != "u").collect();
+            let fallback = if i < ir.nx {
+                format!("x_{i}")
+            } else {
+                format!("u_{}", i - ir.nx)
+            };
+            let fallback_taken = names.iter().any(|n| *n == fallback);
+            let fallback = if fallback_taken {
+                format!("{fallback}_v")
+            } else {
+                fallback
+            };
+            local_ident(n, &fallback, &reserved)
+        })
+        .collect();
+    let (xs, us) = idents.split_at(ir.nx);
+    let binding = quote!(let ([#(#xs),*], [#(#us),*]) = (*x, *u););
+    let tokens = idents.iter().map(|i| quote!(#i)).collect();
+    (binding, tokens)
+}
+
+fn math_imports(used: &BTreeSet<&'static str>) -> TokenStream {
+    if used.is_empty() {
+        return quote!();
+    }
+    let used = used.iter().map(|f| format_ident!("{}", f));
+    quote!(use crate::math::{#(#used),*};)
+}
+
+fn index(i: usize) -> proc_macro2::Literal {
+    proc_macro2::Literal::usize_unsuffixed(i)
+}
+
+/// The whole `model.rs` as tokens, and the math functions it calls.
+pub fn emit(ir: &ModelIr) -> (TokenStream, BTreeSet<&'static str>) {
+    let g = &ir.graph;
+    let (binding, vars) = bind_variables(ir);
+
+    // continuous_dynamics
+    let mut em = Emitter::new(g, vars.clone());
+    let f_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
+    let f_stmts = em.take_statements();
+    let mut used = em.used_functions().clone();
+
+    // continuous_jacobians: only structural non-zeros are assigned.
+    let mut em = Emitter::new(g, vars.clone());
+    let mut jac_assign = Vec::new();
+    for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {
+        for (j, &d) in rx.iter().enumerate() {
+            if !g.is_zero(d) {
+                let a = em.atom(d);
+                let (i, j) = (index(i), index(j));
+                jac_assign.push(quote!(fx[#i][#j] = #a;));
+            }
+        }
+        for (j, &d) in ru.iter().enumerate() {
+            if !g.is_zero(d) {
+                let a = em.atom(d);
+                let (i, j) = (index(i), index(j));
+                jac_assign.push(quote!(fu[#i][#j] = #a;));
+            }
+        }
+    }
+    let jac_stmts = em.take_statements();
+    used.extend(em.used_functions());
+
+    // continuous_sensitivity: f and ∂f/∂x·S + ∂f/∂u·[0 I] sharing one DAG walk.
+    let mut em = Emitter::new(g, vars);
+    let sf_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
+    let mut rows = Vec::new();
+    for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {
+        let nz: Vec<(usize, Id)> = rx.iter().copied().enumerate().filter(|(_, d)| !g.is_zero(*d)).collect();
+        let ii = index(i);
+        let row = match nz.as_slice() {
+            [] => quote!(),
+            [(k, d)] if g.is_one(*d) => {
+                let k = index(*k);
+                quote!(ds[#ii] = s[#k];)
+            }
+            _ => {
+                let terms: Vec<TokenStream> = nz
+                    .iter()
+                    .map(|&(k, d)| {
+                        let k = index(k);
+                        if g.is_one(d) {
+                            quote!(s[#k][j])
+                        } else {
+                            let a = em.atom(d);
+                            quote!(#a * s[#k][j])
+                        }
+                    })
+                    .collect();
+                quote!(for j in 0..NZ { ds[#ii][j] = #(#terms)+*; })
+            }
+        };
+        let mut extra = Vec::new();
+        for (m, &d) in ru.iter().enumerate() {
+            if !g.is_zero(d) {
+                let a = em.atom(d);
+                let col = index(ir.nx + m);
+                extra.push(quote!(ds[#ii][#col] += #a;));
+            }
+        }
+        rows.push(quote!(#row #(#extra)*));
+    }
+    let s_stmts = em.take_statements();
+    used.extend(em.used_functions());
+    let imports = math_imports(&used);
+    let state_list = ir.state_names.join(", ");
+    let input_list = ir.input_names.join(", ");
+    let f_doc = format!(" ẋ = f(x, u) with x = [{state_list}] and u = [{input_list}].");
+    let tokens = quote! {
+        //! Continuous-time model ẋ = f(x, u) and its analytic derivatives.
+        #![allow(clippy::all, unused_variables, unused_mut, non_snake_case)]
+
+        use crate::{Real, NU, NX, NZ};
+        #imports
+
+        #[doc = #f_doc]
+        pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
+            #binding
+            #(#f_stmts)*
+            [#(#f_atoms),*]
+        }
+
+        /// (∂f/∂x, ∂f/∂u) with `fx[i][j] = ∂fᵢ/∂xⱼ`, `fu[i][j] = ∂fᵢ/∂uⱼ`; structural zeros are not computed.
+        pub fn continuous_jacobians(x: &[Real; NX], u: &[Real; NU]) -> ([[Real; NX]; NX], [[Real; NU]; NX]) {
+            #binding
+            let mut fx = [[0.0; NX]; NX];
+            let mut fu = [[0.0; NU]; NX];
+            #(#jac_stmts)*
+            #(#jac_assign)*
+            (fx, fu)
+        }
+
+        /// (f(x, u), ∂f/∂x · S + ∂f/∂u · [0 I]) for a sensitivity S = ∂x/∂(x₀, u):
+        /// one RK4 stage of the forward sensitivity recursion. Rows skip structural zeros of ∂f/∂x.
+        pub fn continuous_sensitivity(x: &[Real; NX], u: &[Real; NU], s: &[[Real; NZ]; NX]) -> ([Real; NX], [[Real; NZ]; NX]) {
+            #binding
+            #(#s_stmts)*
+            let f = [#(#sf_atoms),*];
+            let mut ds = [[0.0; NZ]; NX];
+            #(#rows)*
+            (f, ds)
+        }
+    };
+    (tokens, used)
+}

@@ -1,0 +1,88 @@
+//! The symbolic model IR: ẋ = f(x, u) as a DAG, with its Jacobians.
+
+pub mod pd;
+mod sindy;
+
+use crate::model::{Dynamics, Model};
+use crate::symbolic::{jacobian, Graph, Id, Tape};
+
+/// A model lowered to the symbolic graph. Graph variables are the states
+/// (0..NX) followed by the inputs (NX..NX+NU).
+pub struct ModelIr {
+    pub graph: Graph,
+    pub nx: usize,
+    pub nu: usize,
+    pub state_names: Vec<String>,
+    pub input_names: Vec<String>,
+    /// ẋᵢ = f[i]
+    pub f: Vec<Id>,
+    /// ∂fᵢ/∂xⱼ
+    pub fx: Vec<Vec<Id>>,
+    /// ∂fᵢ/∂uⱼ
+    pub fu: Vec<Vec<Id>>,
+    f_tape: Tape,
+    jac_tape: Tape,
+}
+
+impl ModelIr {
+    pub fn new(model: &Model) -> Self {
+        let mut graph = Graph::new();
+        let vars: Vec<Id> = model.variables().iter().map(|n| graph.var(n)).collect();
+        let f = match &model.dynamics {
+            Dynamics::Pd(p) => pd::dynamics(&mut graph, &vars, p),
+            Dynamics::Sindy(s) => sindy::dynamics(&mut graph, &vars, s),
+        };
+        let (nx, nu) = (model.nx(), model.nu());
+        let all: Vec<usize> = (0..nx + nu).collect();
+        let jac = jacobian(&mut graph, &f, &all);
+        let fx: Vec<Vec<Id>> = jac.iter().map(|r| r[..nx].to_vec()).collect();
+        let fu: Vec<Vec<Id>> = jac.iter().map(|r| r[nx..].to_vec()).collect();
+        let f_tape = Tape::new(&graph, &f);
+        let flat: Vec<Id> = jac.iter().flatten().copied().collect();
+        let jac_tape = Tape::new(&graph, &flat);
+        Self {
+            graph,
+            nx,
+            nu,
+            state_names: model.states.clone(),
+            input_names: model.inputs.clone(),
+            f,
+            fx,
+            fu,
+            f_tape,
+            jac_tape,
+        }
+    }
+
+    fn vars(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
+        assert_eq!(x.len(), self.nx, "state length");
+        assert_eq!(u.len(), self.nu, "input length");
+        x.iter().chain(u).copied().collect()
+    }
+
+    /// ẋ = f(x, u), evaluated by the interpreter.
+    pub fn eval_f(&self, x: &[f64], u: &[f64]) -> Vec<f64> {
+        self.f_tape.eval(&self.vars(x, u))
+    }
+
+    /// (∂f/∂x, ∂f/∂u) as row-major dense matrices (NX×NX, NX×NU).
+    pub fn eval_jacobian(&self, x: &[f64], u: &[f64]) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+        let flat = self.jac_tape.eval(&self.vars(x, u));
+        let n = self.nx + self.nu;
+        let fx = (0..self.nx).map(|i| flat[i * n..i * n + self.nx].to_vec()).collect();
+        let fu = (0..self.nx)
+            .map(|i| flat[i * n + self.nx..(i + 1) * n].to_vec())
+            .collect();
+        (fx, fu)
+    }
+
+    /// Number of structurally non-zero entries of [∂f/∂x ∂f/∂u].
+    pub fn jacobian_nonzeros(&self) -> usize {
+        self.fx
+            .iter()
+            .chain(&self.fu)
+            .flatten()
+            .filter(|&&id| !self.graph.is_zero(id))
+            .count()
+    }
+}

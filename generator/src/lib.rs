@@ -1,0 +1,16 @@
+//! uavgen: from UAV model files to allocation-free `no_std` crates.
+//!
+//! Pipeline: [`model`] (parse + validate `uavgen-model/1`) → [`ir`] (symbolic
+//! DAG of ẋ = f(x, u) with exact Jacobians, built on [`symbolic`]) →
+//! [`discretize`] (RK4 substep choice) → [`codegen`] (one `TokenStream` per
+//! module, spliced templates, prettyplease, atomic write).
+
+pub mod codegen;
+pub mod discretize;
+pub mod ir;
+pub mod model;
+pub mod symbolic;
+
+pub use codegen::{generate, Float, GenerateOptions, GeneratedCrate};
+pub use ir::ModelIr;
+pub use model::{load, Model};

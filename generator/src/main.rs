@@ -1,0 +1,216 @@
+//! The `uavgen` command line.
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use uavgen::codegen::write::write_all;
+use uavgen::codegen::{default_crate_name, Float, GenerateOptions};
+use uavgen::model::pysindy::{import, ImportOptions, KinematicRows};
+
+#[derive(Parser)]
+#[command(
+    name = "uavgen",
+    version,
+    about = "Generate no_std MPC crates for UAV models",
+    args_conflicts_with_subcommands = true
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    generate: GenerateArgs,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Convert a PySINDy export (scripts/export_pysindy.py) to a uavgen-model/1 file.
+    ImportPysindy(ImportArgs),
+    /// Validate a model file and print its summary (sizes, sparsity, substeps).
+    Check(CheckArgs),
+}
+
+#[derive(Args)]
+struct GenerateArgs {
+    /// Model file (uavgen-model/1 JSON).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// MPC horizon N in samples.
+    #[arg(long, default_value_t = 30)]
+    horizon: usize,
+    /// Sample rate in Hz.
+    #[arg(long, default_value_t = 30.0)]
+    rate: f64,
+    /// RK4 substeps per sample (default: chosen automatically, see docs/discretisation.md).
+    #[arg(long)]
+    substeps: Option<usize>,
+    /// Floating-point type of the generated code.
+    #[arg(long, value_enum, default_value_t = FloatArg::F64)]
+    float: FloatArg,
+    /// Crate name (default: the model name).
+    #[arg(long)]
+    crate_name: Option<String>,
+    /// Output directory (default: ./<crate name>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FloatArg {
+    F64,
+    F32,
+}
+
+#[derive(Args)]
+struct ImportArgs {
+    /// JSON export of a fitted PySINDy model.
+    #[arg(long)]
+    input: PathBuf,
+    /// Name of the model.
+    #[arg(long)]
+    name: String,
+    /// Output model file.
+    #[arg(long)]
+    out: PathBuf,
+    /// How rows PySINDy did not fit are completed.
+    #[arg(long, value_enum, default_value_t = KinematicArg::Auto)]
+    kinematic: KinematicArg,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum KinematicArg {
+    /// Standard position/angle states that were not fitted become kinematic.
+    Auto,
+    /// Only the rows the export lists.
+    None,
+}
+
+#[derive(Args)]
+struct CheckArgs {
+    /// Model file.
+    #[arg(long)]
+    model: PathBuf,
+    /// Sample rate in Hz for the substep rule.
+    #[arg(long, default_value_t = 30.0)]
+    rate: f64,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Some(Command::ImportPysindy(args)) => import_pysindy(args),
+        Some(Command::Check(args)) => check(args),
+        None => generate(cli.generate),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(message) => {
+            eprintln!("error: {message}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn generate(args: GenerateArgs) -> Result<(), String> {
+    let path = args.model.ok_or("--model is required (see `uavgen --help`)")?;
+    let model = uavgen::load(&path).map_err(|e| e.to_string())?;
+    let options = GenerateOptions {
+        horizon: args.horizon,
+        rate_hz: args.rate,
+        substeps: args.substeps,
+        float: match args.float {
+            FloatArg::F64 => Float::F64,
+            FloatArg::F32 => Float::F32,
+        },
+        crate_name: args.crate_name,
+        ..GenerateOptions::default()
+    };
+    options.validate().map_err(|e| e.to_string())?;
+    let name = options
+        .crate_name
+        .clone()
+        .unwrap_or_else(|| default_crate_name(&model.name));
+    let out = args.out.unwrap_or_else(|| PathBuf::from(&name));
+    // Refuse early, before the (possibly slow) substep scan.
+    uavgen::codegen::write::check_target(&out).map_err(|e| e.to_string())?;
+    let generated = uavgen::generate(&model, &options).map_err(|e| format!("{}: {e}", path.display()))?;
+    write_all(&out, &generated.files).map_err(|e| e.to_string())?;
+    let how = match &generated.substep_choice {
+        Some(c) => format!(
+            "auto: stiffest eigenvalue {:.1}{:+.1}i 1/s over {} envelope points",
+            c.stiffest.re, c.stiffest.im, c.points
+        ),
+        None => "given".into(),
+    };
+    println!(
+        "generated crate `{}` in {} ({} states, {} inputs, N = {}, {} RK4 substeps per sample ({how}))",
+        generated.crate_name,
+        out.display(),
+        model.nx(),
+        model.nu(),
+        options.horizon,
+        generated.substeps
+    );
+    Ok(())
+}
+
+fn import_pysindy(args: ImportArgs) -> Result<(), String> {
+    let label = args.input.display().to_string();
+    let text = std::fs::read_to_string(&args.input).map_err(|e| format!("{label}: cannot read: {e}"))?;
+    let options = ImportOptions {
+        name: args.name,
+        kinematic: match args.kinematic {
+            KinematicArg::Auto => KinematicRows::Auto,
+            KinematicArg::None => KinematicRows::None,
+        },
+        drop_below: 0.0,
+    };
+    let file = import(&text, &label, &options).map_err(|e| e.to_string())?;
+    let json = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())? + "\n";
+    // Validate the result exactly as `--model` would read it before writing anything.
+    uavgen::model::parse(&json, &label).map_err(|e| format!("the imported model is invalid: {e}"))?;
+    let tmp = args.out.with_extension("json.uavgen-tmp");
+    std::fs::write(&tmp, &json).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, &args.out).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        format!("{}: {e}", args.out.display())
+    })?;
+    println!(
+        "wrote {} ({} coefficients, {} library terms)",
+        args.out.display(),
+        file.coefficients.len(),
+        file.library.len()
+    );
+    Ok(())
+}
+
+fn check(args: CheckArgs) -> Result<(), String> {
+    let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
+    let ir = uavgen::ModelIr::new(&model);
+    println!(
+        "{}: model '{}' ({}), {} states, {} inputs",
+        args.model.display(),
+        model.name,
+        model.kind_name(),
+        model.nx(),
+        model.nu()
+    );
+    println!(
+        "  symbolic graph: {} nodes; Jacobian [∂f/∂x ∂f/∂u]: {} structural non-zeros of {}",
+        ir.graph.len(),
+        ir.jacobian_nonzeros(),
+        model.nx() * (model.nx() + model.nu())
+    );
+    if !(args.rate.is_finite() && args.rate > 0.0) {
+        return Err(format!(
+            "--rate: must be a positive sample rate in Hz, got {}",
+            args.rate
+        ));
+    }
+    let choice = uavgen::discretize::auto_substeps(&ir, 1.0 / args.rate, &uavgen::discretize::Envelope::default())
+        .map_err(|e| e.to_string())?;
+    println!(
+        "  RK4 at {} Hz: {} substeps (stiffest eigenvalue {:.2}{:+.2}i 1/s over {} envelope points)",
+        args.rate, choice.substeps, choice.stiffest.re, choice.stiffest.im, choice.points
+    );
+    Ok(())
+}

@@ -1,0 +1,428 @@
+//! Reading and validating model files.
+
+use super::error::{ModelError, ModelErrorKind as K};
+use super::file::{PdFile, SindyFile, DEFAULT_INPUTS, DEFAULT_STATES, FORMAT};
+use super::term::{parse_term, TermError};
+use super::{Dynamics, Model, PdParams, Row, SindySpec, Source};
+use serde::de::DeserializeOwned;
+use serde_json::Value;
+use sha2::{Digest, Sha256};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Read and validate a model file.
+pub fn load(path: &Path) -> Result<Model, ModelError> {
+    let label = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| ModelError::new(&label, "", K::Io, format!("cannot read: {e}")))?;
+    let text = String::from_utf8(bytes).map_err(|_| ModelError::new(&label, "", K::Json, "not UTF-8 text"))?;
+    let file_name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or(label.clone());
+    let mut model = parse(&text, &label)?;
+    model.source.file = file_name;
+    Ok(model)
+}
+
+/// Validate model text; `label` names the file in errors.
+pub fn parse(text: &str, label: &str) -> Result<Model, ModelError> {
+    let value: Value = serde_json::from_str(text).map_err(|e| json_syntax_error(text, label, &e))?;
+    let obj = value
+        .as_object()
+        .ok_or_else(|| ModelError::new(label, "", K::Json, "the top level must be a JSON object"))?;
+    match obj.get("format") {
+        None => {
+            return Err(ModelError::new(
+                label,
+                "format",
+                K::MissingField,
+                "missing field `format`",
+            ))
+        }
+        Some(Value::String(f)) if f == FORMAT => {}
+        Some(other) => {
+            return Err(ModelError::new(
+                label,
+                "format",
+                K::UnknownFormat,
+                format!("unknown format version {other}: this uavgen reads \"{FORMAT}\""),
+            ))
+        }
+    }
+    let source = Source {
+        file: label.to_owned(),
+        sha256: hex_sha256(text.as_bytes()),
+    };
+    match obj.get("kind") {
+        None => Err(ModelError::new(
+            label,
+            "kind",
+            K::MissingField,
+            "missing field `kind` (\"pd\" or \"sindy\")",
+        )),
+        Some(Value::String(k)) if k == "pd" => validate_pd(typed::<PdFile>(value, label)?, label, source),
+        Some(Value::String(k)) if k == "sindy" => validate_sindy(typed::<SindyFile>(value, label)?, label, source),
+        Some(other) => Err(ModelError::new(
+            label,
+            "kind",
+            K::UnknownKind,
+            format!("unknown kind {other}: expected \"pd\" or \"sindy\""),
+        )),
+    }
+}
+
+pub(crate) fn hex_sha256(bytes: &[u8]) -> String {
+    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn json_syntax_error(text: &str, label: &str, e: &serde_json::Error) -> ModelError {
+    let at = format!("line {}, column {}", e.line(), e.column());
+    // JSON has no NaN/Infinity; Python's json module writes them anyway.
+    let line = text.lines().nth(e.line().saturating_sub(1)).unwrap_or("");
+    let col = e.column().saturating_sub(1).min(line.len());
+    let rest = line.get(col..).unwrap_or("").trim_start_matches(['-', '+']);
+    let prev = line.get(..col).unwrap_or("");
+    let msg = e.to_string();
+    if ["NaN", "Infinity", "inf", "nan"]
+        .iter()
+        .any(|t| rest.starts_with(t) || prev.ends_with(t))
+        || msg.contains("out of range")
+    {
+        return ModelError::new(
+            label,
+            at,
+            K::NonFinite,
+            "non-finite number (NaN or infinite): every number in a model file must be finite",
+        );
+    }
+    let msg = msg.split(" at line ").next().unwrap_or(&msg).to_owned();
+    ModelError::new(label, at, K::Json, format!("invalid JSON: {msg}"))
+}
+
+fn typed<T: DeserializeOwned>(value: Value, label: &str) -> Result<T, ModelError> {
+    serde_path_to_error::deserialize::<_, T>(value).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner().to_string();
+        let kind = if inner.starts_with("missing field") {
+            K::MissingField
+        } else if inner.starts_with("unknown field") {
+            K::UnknownField
+        } else {
+            K::BadValue
+        };
+        let path = if path == "." { String::new() } else { path };
+        ModelError::new(label, path, kind, inner)
+    })
+}
+
+fn finite(label: &str, field: &str, v: f64) -> Result<f64, ModelError> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(ModelError::new(
+            label,
+            field,
+            K::NonFinite,
+            format!("non-finite value {v}"),
+        ))
+    }
+}
+
+/// State and input names: defaults, counts, identifiers, uniqueness.
+fn names(
+    label: &str,
+    states: Option<Vec<String>>,
+    inputs: Option<Vec<String>>,
+    fixed: bool,
+) -> Result<(Vec<String>, Vec<String>), ModelError> {
+    let states = states.unwrap_or_else(|| DEFAULT_STATES.iter().map(|s| s.to_string()).collect());
+    let inputs = inputs.unwrap_or_else(|| DEFAULT_INPUTS.iter().map(|s| s.to_string()).collect());
+    if fixed && states.len() != 12 {
+        return Err(ModelError::new(
+            label,
+            "states",
+            K::WrongCount,
+            format!("the PD model has 12 states, found {}", states.len()),
+        ));
+    }
+    if fixed && inputs.len() != 4 {
+        return Err(ModelError::new(
+            label,
+            "inputs",
+            K::WrongCount,
+            format!("the PD model has 4 inputs, found {}", inputs.len()),
+        ));
+    }
+    if states.is_empty() {
+        return Err(ModelError::new(
+            label,
+            "states",
+            K::WrongCount,
+            "at least one state is required",
+        ));
+    }
+    let mut seen = HashMap::new();
+    for (field, list) in [("states", &states), ("inputs", &inputs)] {
+        for (i, name) in list.iter().enumerate() {
+            let loc = format!("{field}[{i}]");
+            let valid = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+                && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+            if !valid || name == "sin" || name == "cos" {
+                return Err(ModelError::new(
+                    label,
+                    loc,
+                    K::BadValue,
+                    format!("'{name}' is not a valid variable name (letters, digits, '_'; not sin/cos)"),
+                ));
+            }
+            if let Some(first) = seen.insert(name.clone(), loc.clone()) {
+                return Err(ModelError::new(
+                    label,
+                    loc,
+                    K::Duplicate,
+                    format!("variable '{name}' already declared at {first}"),
+                ));
+            }
+        }
+    }
+    Ok((states, inputs))
+}
+
+fn validate_pd(f: PdFile, label: &str, source: Source) -> Result<Model, ModelError> {
+    let (states, inputs) = names(label, f.states, f.inputs, true)?;
+    let mass = finite(label, "mass", f.mass)?;
+    let gravity = finite(label, "gravity", f.gravity)?;
+    if mass <= 0.0 {
+        return Err(ModelError::new(
+            label,
+            "mass",
+            K::BadValue,
+            format!("mass must be positive, found {mass}"),
+        ));
+    }
+    let mut xi = [0.0; 16];
+    match &f.xi {
+        Value::Array(items) => {
+            if items.len() != 16 {
+                return Err(ModelError::new(
+                    label,
+                    "xi",
+                    K::WrongCount,
+                    format!("expected 16 values ξ1..ξ16, found {}", items.len()),
+                ));
+            }
+            for (k, item) in items.iter().enumerate() {
+                xi[k] = number(label, &format!("xi[{k}]"), item)?;
+            }
+        }
+        Value::Object(map) => {
+            for key in map.keys() {
+                let ok = key
+                    .strip_prefix("xi")
+                    .and_then(|n| n.parse::<usize>().ok())
+                    .is_some_and(|n| (1..=16).contains(&n) && key == &format!("xi{n}"));
+                if !ok {
+                    return Err(ModelError::new(
+                        label,
+                        format!("xi.{key}"),
+                        K::UnknownField,
+                        format!("unknown parameter '{key}': expected xi1..xi16"),
+                    ));
+                }
+            }
+            for (k, slot) in xi.iter_mut().enumerate() {
+                let key = format!("xi{}", k + 1);
+                let item = map.get(&key).ok_or_else(|| {
+                    ModelError::new(
+                        label,
+                        format!("xi.{key}"),
+                        K::MissingField,
+                        format!("missing parameter `{key}`"),
+                    )
+                })?;
+                *slot = number(label, &format!("xi.{key}"), item)?;
+            }
+        }
+        _ => {
+            return Err(ModelError::new(
+                label,
+                "xi",
+                K::BadValue,
+                "expected an array of 16 numbers or an object with keys xi1..xi16",
+            ))
+        }
+    }
+    let p = PdParams { mass, gravity, xi };
+    for (k, what) in [(14, "Ix"), (15, "Iy"), (16, "Iz")] {
+        if p.xi(k) <= 0.0 {
+            return Err(ModelError::new(
+                label,
+                format!("xi{k}"),
+                K::BadValue,
+                format!("ξ{k} = {what} is an inertia and must be positive, found {}", p.xi(k)),
+            ));
+        }
+    }
+    // (m I + ξ11 b e3ᵀ) is singular where m + ξ11 cos φ cos θ = 0, cos φ cos θ ∈ (0, 1].
+    if mass + p.xi(11).min(0.0) <= 0.0 {
+        return Err(ModelError::new(
+            label,
+            "xi11",
+            K::BadValue,
+            format!(
+                "ξ11 = {} ≤ −m makes m + ξ11 cos φ cos θ vanish: the vertical mass matrix is singular",
+                p.xi(11)
+            ),
+        ));
+    }
+    // Rotational mass matrix M(Ω) + diag(0, 0, ξ12) at hover is diag(Ix, Iy, Iz + ξ12).
+    if p.xi(16) + p.xi(12) <= 0.0 {
+        return Err(ModelError::new(
+            label,
+            "xi12",
+            K::BadValue,
+            format!("ξ12 = {} ≤ −Iz makes the yaw mass matrix singular", p.xi(12)),
+        ));
+    }
+    Ok(Model {
+        name: name(label, f.name)?,
+        states,
+        inputs,
+        provenance: f.provenance,
+        dynamics: Dynamics::Pd(p),
+        source,
+    })
+}
+
+fn number(label: &str, loc: &str, v: &Value) -> Result<f64, ModelError> {
+    let x = v
+        .as_f64()
+        .ok_or_else(|| ModelError::new(label, loc, K::BadValue, format!("expected a number, found {v}")))?;
+    finite(label, loc, x)
+}
+
+fn name(label: &str, name: String) -> Result<String, ModelError> {
+    if name.trim().is_empty() {
+        return Err(ModelError::new(
+            label,
+            "name",
+            K::BadValue,
+            "the model name must not be empty",
+        ));
+    }
+    Ok(name)
+}
+
+fn term_error(label: &str, loc: String, text: &str, e: TermError) -> ModelError {
+    let kind = match e {
+        TermError::Syntax(_) => K::BadTerm,
+        TermError::UnknownVariable(_) => K::UnknownVariable,
+    };
+    ModelError::new(label, loc, kind, format!("{e} in term '{text}'"))
+}
+
+fn validate_sindy(f: SindyFile, label: &str, source: Source) -> Result<Model, ModelError> {
+    let (states, inputs) = names(label, f.states, f.inputs, false)?;
+    let vars: Vec<String> = states.iter().chain(&inputs).cloned().collect();
+    let state_index = |loc: String, s: &str| {
+        states.iter().position(|n| n == s).ok_or_else(|| {
+            let kind = if inputs.iter().any(|n| n == s) {
+                K::BadValue
+            } else {
+                K::UnknownVariable
+            };
+            ModelError::new(
+                label,
+                loc,
+                kind,
+                format!("'{s}' is not a state (states: {})", states.join(", ")),
+            )
+        })
+    };
+    let mut library = Vec::with_capacity(f.library.len());
+    let mut by_term = HashMap::new();
+    for (i, text) in f.library.iter().enumerate() {
+        let loc = format!("library[{i}]");
+        let term = parse_term(text, &vars).map_err(|e| term_error(label, loc.clone(), text, e))?;
+        if let Some(first) = by_term.insert(term.clone(), i) {
+            return Err(ModelError::new(
+                label,
+                loc,
+                K::Duplicate,
+                format!("term '{text}' duplicates library[{first}] ('{}')", f.library[first]),
+            ));
+        }
+        library.push(term);
+    }
+    let mut rows: Vec<Option<Row>> = vec![None; states.len()];
+    for (i, (state, derivative)) in f.kinematic.iter().enumerate() {
+        let si = state_index(format!("kinematic[{i}][0]"), state)?;
+        let di = state_index(format!("kinematic[{i}][1]"), derivative)?;
+        if rows[si].is_some() {
+            return Err(ModelError::new(
+                label,
+                format!("kinematic[{i}]"),
+                K::Duplicate,
+                format!("state '{state}' is listed as kinematic twice"),
+            ));
+        }
+        rows[si] = Some(Row::Kinematic(di));
+    }
+    let mut entries: HashMap<(usize, usize), usize> = HashMap::new();
+    let mut sparse: Vec<Vec<(usize, f64)>> = vec![Vec::new(); states.len()];
+    for (i, c) in f.coefficients.iter().enumerate() {
+        let loc = format!("coefficients[{i}]");
+        let si = state_index(format!("{loc}.state"), &c.state)?;
+        let term = parse_term(&c.term, &vars).map_err(|e| term_error(label, format!("{loc}.term"), &c.term, e))?;
+        let ti = *by_term.get(&term).ok_or_else(|| {
+            ModelError::new(
+                label,
+                format!("{loc}.term"),
+                K::UnknownVariable,
+                format!("term '{}' is not in the library", c.term),
+            )
+        })?;
+        finite(label, &format!("{loc}.coefficient"), c.coefficient)?;
+        if matches!(rows[si], Some(Row::Kinematic(_))) {
+            return Err(ModelError::new(
+                label,
+                loc,
+                K::Duplicate,
+                format!(
+                    "state '{}' is kinematic: its row cannot also have coefficients",
+                    c.state
+                ),
+            ));
+        }
+        if let Some(first) = entries.insert((si, ti), i) {
+            return Err(ModelError::new(
+                label,
+                loc,
+                K::Duplicate,
+                format!(
+                    "duplicate entry for state '{}', term '{}' (first at coefficients[{first}])",
+                    c.state, c.term
+                ),
+            ));
+        }
+        sparse[si].push((ti, c.coefficient));
+    }
+    let rows = rows
+        .into_iter()
+        .zip(sparse)
+        .map(|(row, mut entries)| {
+            row.unwrap_or_else(|| {
+                entries.sort_by_key(|&(t, _)| t);
+                Row::Sparse(entries)
+            })
+        })
+        .collect();
+    Ok(Model {
+        name: name(label, f.name)?,
+        states,
+        inputs,
+        provenance: f.provenance,
+        dynamics: Dynamics::Sindy(SindySpec { library, rows }),
+        source,
+    })
+}

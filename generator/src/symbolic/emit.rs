@@ -1,0 +1,142 @@
+//! Emission of expressions as straight-line Rust (`let` per shared node).
+//!
+//! The emitter walks the DAG in topological order and binds every non-leaf
+//! node it needs to a fresh `tN` local exactly once, so the emitted code
+//! inherits the graph's common-subexpression elimination. Constants and
+//! variables are inlined. Math functions resolve to `sin`, `cos` and `powi`
+//! in scope at the call site (the spliced `math` module of the generated crate).
+
+use super::expr::{Func, Graph, Id, Node};
+use proc_macro2::{Ident, Literal, Span, TokenStream};
+use quote::{format_ident, quote};
+use std::collections::{BTreeSet, HashMap};
+
+/// Emits `let` statements for expressions of one graph into one function body.
+pub struct Emitter<'g> {
+    g: &'g Graph,
+    vars: Vec<TokenStream>,
+    bound: HashMap<Id, TokenStream>,
+    statements: Vec<TokenStream>,
+    next: usize,
+    prefix: String,
+    used_functions: BTreeSet<&'static str>,
+}
+
+/// A float literal (unsuffixed, so it takes the type `Real` of its context).
+pub fn float_literal(value: f64) -> TokenStream {
+    assert!(value.is_finite(), "non-finite constant reached the emitter");
+    let lit = Literal::f64_unsuffixed(value.abs());
+    if value.is_sign_negative() {
+        quote!(-#lit)
+    } else {
+        quote!(#lit)
+    }
+}
+
+impl<'g> Emitter<'g> {
+    /// `vars[i]` is the token expression for graph variable `i`.
+    pub fn new(g: &'g Graph, vars: Vec<TokenStream>) -> Self {
+        assert_eq!(vars.len(), g.var_count(), "one token per variable");
+        Self {
+            g,
+            vars,
+            bound: HashMap::new(),
+            statements: Vec::new(),
+            next: 0,
+            prefix: "t".into(),
+            used_functions: BTreeSet::new(),
+        }
+    }
+
+    /// Token expression (an atom: identifier, literal or variable) for `id`,
+    /// emitting whatever `let` statements it needs first.
+    pub fn atom(&mut self, id: Id) -> TokenStream {
+        for node in self.g.reachable(&[id]) {
+            if !self.bound.contains_key(&node) {
+                let tokens = self.bind(node);
+                self.bound.insert(node, tokens);
+            }
+        }
+        self.bound[&id].clone()
+    }
+
+    /// Statements emitted so far (in order), leaving the emitter empty of them.
+    pub fn take_statements(&mut self) -> Vec<TokenStream> {
+        std::mem::take(&mut self.statements)
+    }
+
+    /// Names of the math functions (`sin`, `cos`, `powi`) the statements call.
+    pub fn used_functions(&self) -> &BTreeSet<&'static str> {
+        &self.used_functions
+    }
+
+    fn get(&self, id: Id) -> TokenStream {
+        self.bound[&id].clone()
+    }
+
+    fn bind(&mut self, id: Id) -> TokenStream {
+        let rhs = match self.g.node(id) {
+            Node::Const(bits) => return float_literal(f64::from_bits(bits)),
+            Node::Var(v) => return self.vars[v as usize].clone(),
+            Node::Add(a, b) => {
+                let (a, b) = (self.get(a), self.get(b));
+                quote!(#a + #b)
+            }
+            Node::Mul(a, b) => {
+                let (a, b) = (self.get(a), self.get(b));
+                quote!(#a * #b)
+            }
+            Node::Neg(a) => {
+                let a = self.get(a);
+                quote!(-#a)
+            }
+            Node::Recip(a) => {
+                let a = self.get(a);
+                quote!(1.0 / #a)
+            }
+            Node::Powi(a, n) => {
+                let a = self.get(a);
+                let pos = match n.unsigned_abs() {
+                    2 => quote!(#a * #a),
+                    3 => quote!(#a * #a * #a),
+                    k => {
+                        let k = Literal::u32_unsuffixed(k);
+                        self.used_functions.insert("powi");
+                        quote!(powi(#a, #k))
+                    }
+                };
+                if n < 0 {
+                    quote!(1.0 / (#pos))
+                } else {
+                    pos
+                }
+            }
+            Node::Call(Func::Sin, a) => {
+                let a = self.get(a);
+                self.used_functions.insert("sin");
+                quote!(sin(#a))
+            }
+            Node::Call(Func::Cos, a) => {
+                let a = self.get(a);
+                self.used_functions.insert("cos");
+                quote!(cos(#a))
+            }
+        };
+        let name = format_ident!("{}{}", self.prefix, self.next);
+        self.next += 1;
+        self.statements.push(quote!(let #name = #rhs;));
+        quote!(#name)
+    }
+}
+
+/// An identifier for a user-supplied variable name, or `fallback` when the
+/// name cannot be a Rust local (keyword, invalid, or clashing with `reserved`).
+pub fn local_ident(name: &str, fallback: &str, reserved: &[&str]) -> Ident {
+    let clashes_with_temporary =
+        name.len() > 1 && name.starts_with('t') && name[1..].chars().all(|c| c.is_ascii_digit());
+    if !clashes_with_temporary && !reserved.contains(&name) && syn::parse_str::<Ident>(name).is_ok() {
+        Ident::new(name, Span::call_site())
+    } else {
+        Ident::new(fallback, Span::call_site())
+    }
+}

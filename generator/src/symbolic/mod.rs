@@ -1,0 +1,12 @@
+//! Symbolic core: hash-consed expression DAG, exact differentiation,
+//! f64 evaluation and emission to Rust tokens.
+
+pub mod diff;
+pub mod emit;
+pub mod eval;
+pub mod expr;
+
+pub use diff::{diff, jacobian};
+pub use emit::{float_literal, Emitter};
+pub use eval::Tape;
+pub use expr::{Func, Graph, Id, Node};

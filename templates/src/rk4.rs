@@ -1,0 +1,182 @@
+//! Explicit RK4 with `SUBSTEPS` substeps per sample and forward sensitivities.
+
+use crate::model::{continuous_dynamics, continuous_sensitivity};
+use crate::{Real, DT, NU, NX, NZ, SUBSTEPS};
+
+/// Substep length h = DT / M.
+pub const H: Real = DT / SUBSTEPS as Real;
+
+/// y = x + a k
+#[inline]
+fn axpy(x: &[Real; NX], a: Real, k: &[Real; NX]) -> [Real; NX] {
+    let mut y = *x;
+    for (yi, ki) in y.iter_mut().zip(k) {
+        *yi += a * ki;
+    }
+    y
+}
+
+/// Y = S + a D (row by row)
+#[inline]
+fn axpy_rows(s: &[[Real; NZ]; NX], a: Real, d: &[[Real; NZ]; NX]) -> [[Real; NZ]; NX] {
+    let mut y = *s;
+    for (yr, dr) in y.iter_mut().zip(d) {
+        for (yi, di) in yr.iter_mut().zip(dr) {
+            *yi += a * di;
+        }
+    }
+    y
+}
+
+/// One RK4 substep:
+/// k1 = f(x), k2 = f(x + h/2 k1), k3 = f(x + h/2 k2), k4 = f(x + h k3),
+/// x⁺ = x + h/6 (k1 + 2k2 + 2k3 + k4).
+#[inline]
+fn substep(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
+    let k1 = continuous_dynamics(x, u);
+    let k2 = continuous_dynamics(&axpy(x, 0.5 * H, &k1), u);
+    let k3 = continuous_dynamics(&axpy(x, 0.5 * H, &k2), u);
+    let k4 = continuous_dynamics(&axpy(x, H, &k3), u);
+    let mut next = *x;
+    for i in 0..NX {
+        next[i] += H / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+    next
+}
+
+/// x⁺ = F(x, u): the state one sample (DT) later, input held constant.
+pub fn discrete_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
+    let mut xk = *x;
+    for _ in 0..SUBSTEPS {
+        xk = substep(&xk, u);
+    }
+    xk
+}
+
+/// (x⁺, A, B) with A[i][j] = ∂x⁺ᵢ/∂xⱼ and B[i][j] = ∂x⁺ᵢ/∂uⱼ, by forward
+/// sensitivities through every stage: with S = ∂x/∂(x₀, u), starting at [I 0],
+/// dkᵢ = ∂f/∂x · Sᵢ + ∂f/∂u · [0 I] and S⁺ = S + h/6 (dk1 + 2dk2 + 2dk3 + dk4).
+/// This is the exact derivative of [`discrete_dynamics`].
+#[allow(clippy::type_complexity)]
+pub fn discrete_linearization(x: &[Real; NX], u: &[Real; NU]) -> ([Real; NX], [[Real; NX]; NX], [[Real; NU]; NX]) {
+    let mut xk = *x;
+    let mut s = [[0.0; NZ]; NX];
+    for (i, row) in s.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for _ in 0..SUBSTEPS {
+        let (k1, d1) = continuous_sensitivity(&xk, u, &s);
+        let (k2, d2) = continuous_sensitivity(&axpy(&xk, 0.5 * H, &k1), u, &axpy_rows(&s, 0.5 * H, &d1));
+        let (k3, d3) = continuous_sensitivity(&axpy(&xk, 0.5 * H, &k2), u, &axpy_rows(&s, 0.5 * H, &d2));
+        let (k4, d4) = continuous_sensitivity(&axpy(&xk, H, &k3), u, &axpy_rows(&s, H, &d3));
+        for i in 0..NX {
+            xk[i] += H / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            for j in 0..NZ {
+                s[i][j] += H / 6.0 * (d1[i][j] + 2.0 * d2[i][j] + 2.0 * d3[i][j] + d4[i][j]);
+            }
+        }
+    }
+    let mut a = [[0.0; NX]; NX];
+    let mut b = [[0.0; NU]; NX];
+    for i in 0..NX {
+        a[i].copy_from_slice(&s[i][..NX]);
+        b[i].copy_from_slice(&s[i][NX..]);
+    }
+    (xk, a, b)
+}
+
+/// (A, B) of [`discrete_linearization`].
+#[allow(clippy::type_complexity)]
+pub fn discrete_jacobians(x: &[Real; NX], u: &[Real; NU]) -> ([[Real; NX]; NX], [[Real; NU]; NX]) {
+    let (_, a, b) = discrete_linearization(x, u);
+    (a, b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::continuous_jacobians;
+
+    type M2 = [[Real; 2]; 2];
+
+    fn mat_mul(a: &M2, b: &M2) -> M2 {
+        let mut c = [[0.0; 2]; 2];
+        for i in 0..2 {
+            for j in 0..2 {
+                c[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j];
+            }
+        }
+        c
+    }
+
+    /// For linear ẋ = Ac x + Bc u one RK4 substep is x⁺ = P x + Q Bc u with
+    /// P = I + hA + (hA)²/2 + (hA)³/6 + (hA)⁴/24 and
+    /// Q = h (I + hA/2 + (hA)²/6 + (hA)³/24); hand-expanded here.
+    fn rk4_matrices() -> (M2, [Real; 2]) {
+        let (ac, bc) = continuous_jacobians(&[0.0; 2], &[0.0]);
+        let ha = [[H * ac[0][0], H * ac[0][1]], [H * ac[1][0], H * ac[1][1]]];
+        let ha2 = mat_mul(&ha, &ha);
+        let ha3 = mat_mul(&ha2, &ha);
+        let ha4 = mat_mul(&ha3, &ha);
+        let mut p = [[0.0; 2]; 2];
+        let mut q = [[0.0; 2]; 2];
+        for i in 0..2 {
+            for j in 0..2 {
+                let id = if i == j { 1.0 } else { 0.0 };
+                p[i][j] = id + ha[i][j] + ha2[i][j] / 2.0 + ha3[i][j] / 6.0 + ha4[i][j] / 24.0;
+                q[i][j] = H * (id + ha[i][j] / 2.0 + ha2[i][j] / 6.0 + ha3[i][j] / 24.0);
+            }
+        }
+        // Compose SUBSTEPS = 2 substeps: x⁺ = P(Px + QBu) + QBu.
+        let qb = [
+            q[0][0] * bc[0][0] + q[0][1] * bc[1][0],
+            q[1][0] * bc[0][0] + q[1][1] * bc[1][0],
+        ];
+        let pp = mat_mul(&p, &p);
+        let b_total = [
+            p[0][0] * qb[0] + p[0][1] * qb[1] + qb[0],
+            p[1][0] * qb[0] + p[1][1] * qb[1] + qb[1],
+        ];
+        (pp, b_total)
+    }
+
+    #[test]
+    fn linear_model_matches_hand_expanded_rk4() {
+        assert_eq!(SUBSTEPS, 2);
+        let (ad, bd) = rk4_matrices();
+        let x = [0.3, -1.2];
+        let u = [0.7];
+        let next = discrete_dynamics(&x, &u);
+        for i in 0..2 {
+            let expect = ad[i][0] * x[0] + ad[i][1] * x[1] + bd[i] * u[0];
+            assert!((next[i] - expect).abs() < 1e-14, "state {i}: {} vs {expect}", next[i]);
+        }
+        let (a, b) = discrete_jacobians(&x, &u);
+        for i in 0..2 {
+            for j in 0..2 {
+                assert!((a[i][j] - ad[i][j]).abs() < 1e-14);
+            }
+            assert!((b[i][0] - bd[i]).abs() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn linearization_state_equals_discrete_dynamics() {
+        let x = [1.0, 2.0];
+        let u = [-0.5];
+        let (next, _, _) = discrete_linearization(&x, &u);
+        assert_eq!(next, discrete_dynamics(&x, &u));
+    }
+
+    #[test]
+    fn one_sample_decays_like_the_exact_solution() {
+        // Free response of the stable oscillator: RK4 (h = 0.05) is close to exp(Ac DT).
+        let x = [1.0, 0.0];
+        let next = discrete_dynamics(&x, &[0.0]);
+        // Exact: ωd = sqrt(K − C²/4), x(t) = e^{−Ct/2}(cos ωd t + C/(2ωd) sin ωd t).
+        let wd = libm::sqrt(4.0 - 0.0625);
+        let t = DT;
+        let exact = libm::exp(-0.25 * t) * (libm::cos(wd * t) + 0.25 / wd * libm::sin(wd * t));
+        assert!((next[0] - exact).abs() < 1e-6, "{} vs {exact}", next[0]);
+    }
+}
