@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Regenerate every checked-in crate under generated/ from models/ with the
+# options recorded here. CI runs this and then `git diff --exit-code generated/`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release -q -p uavgen
+uavgen=target/release/uavgen
+$uavgen --model models/pd_paper.json --horizon 30 --out generated/pd_paper
+$uavgen --model models/pd_hover.json --horizon 30 --out generated/pd_hover
+$uavgen --model models/pd_hover.json --horizon 30 --float f32 --crate-name pd_hover_f32 --out generated/pd_hover_f32
+$uavgen --model models/sindy_m100.json --horizon 30 --out generated/sindy_m100
