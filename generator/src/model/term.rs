@@ -138,7 +138,7 @@ pub fn parse_term(text: &str, vars: &[String]) -> Result<Term, TermError> {
             }
             _ => Base::Var(lookup(name)?),
         };
-        lx.skip_ws();
+        let mut had_ws = lx.skip_ws();
         let mut power = 1;
         if lx.eat('^') {
             lx.skip_ws();
@@ -155,7 +155,7 @@ pub fn parse_term(text: &str, vars: &[String]) -> Result<Term, TermError> {
             Some((_, p)) => *p += power,
             None => factors.push((base, power)),
         }
-        let had_ws = lx.skip_ws();
+        had_ws |= lx.skip_ws();
         if lx.pos == trimmed.len() {
             break;
         }
@@ -244,6 +244,7 @@ mod tests {
         let v = vars();
         assert_eq!(parse_term("vx vx", &v).unwrap(), parse_term("vx^2", &v).unwrap());
         assert_eq!(parse_term("vx^2 u_vz", &v).unwrap().display(&v), "vx^2*u_vz");
+        assert_eq!(parse_term("u_vz vx", &v).unwrap(), parse_term("vx*u_vz", &v).unwrap());
         assert_eq!(parse_term("1", &v).unwrap().factors.len(), 0);
     }
 

@@ -291,7 +291,8 @@ mod tests {
         let nx = g.neg(x);
         assert_eq!(g.neg(nx), x);
         assert_eq!(g.powi(x, 1), x);
-        assert_eq!(g.as_const(g.clone().powi(two, 3)), Some(8.0));
+        let eight = g.powi(two, 3);
+        assert_eq!(g.as_const(eight), Some(8.0));
         let neg_zero = g.constant(-0.0);
         assert_eq!(neg_zero, zero);
     }
