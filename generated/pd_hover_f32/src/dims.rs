@@ -13,6 +13,6 @@ pub const NZ: usize = NX + NU;
 /// Prediction horizon (samples).
 pub const N: usize = 30;
 /// Sample period in seconds.
-pub const DT: Real = 0.03333333333333333;
+pub const DT: Real = 0.033333335;
 /// RK4 substeps per sample.
 pub const SUBSTEPS: usize = 1;

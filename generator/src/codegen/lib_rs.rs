@@ -18,7 +18,7 @@ pub fn dims_values(ir: &ModelIr, options: &GenerateOptions, substeps: usize) -> 
         ("NX", lit(ir.nx)),
         ("NU", lit(ir.nu)),
         ("N", lit(options.horizon)),
-        ("DT", float_literal(1.0 / options.rate_hz)),
+        ("DT", float_literal(1.0 / options.rate_hz, options.float)),
         ("SUBSTEPS", lit(substeps)),
     ])
 }

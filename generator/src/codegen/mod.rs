@@ -14,22 +14,7 @@ use crate::model::Model;
 use proc_macro2::TokenStream;
 use std::path::PathBuf;
 
-/// Floating-point type of the generated code.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Float {
-    #[default]
-    F64,
-    F32,
-}
-
-impl Float {
-    pub fn name(self) -> &'static str {
-        match self {
-            Float::F64 => "f64",
-            Float::F32 => "f32",
-        }
-    }
-}
+pub use crate::symbolic::Float;
 
 /// Everything that shapes a generated crate besides the model.
 #[derive(Clone, Debug)]
@@ -163,7 +148,7 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
 
     let dims = splice::specialise_dims(options.float.name(), &lib_rs::dims_values(&ir, options, substeps))
         .map_err(GenerateError::Template)?;
-    let (model_tokens, used_math) = model_rs::emit(&ir);
+    let (model_tokens, used_math) = model_rs::emit(&ir, options.float);
     let mut files = vec![
         (
             PathBuf::from("Cargo.toml"),

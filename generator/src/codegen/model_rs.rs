@@ -3,7 +3,7 @@
 
 use crate::ir::ModelIr;
 use crate::symbolic::emit::local_ident;
-use crate::symbolic::{Emitter, Id};
+use crate::symbolic::{Emitter, Float, Id};
 use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 use std::collections::BTreeSet;
@@ -26,7 +26,7 @@ fn bind_variables(ir: &ModelIr) -> (TokenStream, Vec<TokenStream>) {
             } else {
                 format!("u_{}", i - ir.nx)
             };
-            let fallback_taken = names.iter().any(|n| *n == fallback);
+            let fallback_taken = names.contains(&fallback);
             let fallback = if fallback_taken {
                 format!("{fallback}_v")
             } else {
@@ -54,18 +54,18 @@ fn index(i: usize) -> proc_macro2::Literal {
 }
 
 /// The whole `model.rs` as tokens, and the math functions it calls.
-pub fn emit(ir: &ModelIr) -> (TokenStream, BTreeSet<&'static str>) {
+pub fn emit(ir: &ModelIr, float: Float) -> (TokenStream, BTreeSet<&'static str>) {
     let g = &ir.graph;
     let (binding, vars) = bind_variables(ir);
 
     // continuous_dynamics
-    let mut em = Emitter::new(g, vars.clone());
+    let mut em = Emitter::new(g, vars.clone(), float);
     let f_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
     let f_stmts = em.take_statements();
     let mut used = em.used_functions().clone();
 
     // continuous_jacobians: only structural non-zeros are assigned.
-    let mut em = Emitter::new(g, vars.clone());
+    let mut em = Emitter::new(g, vars.clone(), float);
     let mut jac_assign = Vec::new();
     for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {
         for (j, &d) in rx.iter().enumerate() {
@@ -87,7 +87,7 @@ pub fn emit(ir: &ModelIr) -> (TokenStream, BTreeSet<&'static str>) {
     used.extend(em.used_functions());
 
     // continuous_sensitivity: f and ∂f/∂x·S + ∂f/∂u·[0 I] sharing one DAG walk.
-    let mut em = Emitter::new(g, vars);
+    let mut em = Emitter::new(g, vars, float);
     let sf_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
     let mut rows = Vec::new();
     for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {

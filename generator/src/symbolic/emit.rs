@@ -19,13 +19,35 @@ pub struct Emitter<'g> {
     statements: Vec<TokenStream>,
     next: usize,
     prefix: String,
+    float: Float,
     used_functions: BTreeSet<&'static str>,
 }
 
-/// A float literal (unsuffixed, so it takes the type `Real` of its context).
-pub fn float_literal(value: f64) -> TokenStream {
+/// Floating-point type of emitted code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Float {
+    #[default]
+    F64,
+    F32,
+}
+
+impl Float {
+    pub fn name(self) -> &'static str {
+        match self {
+            Float::F64 => "f64",
+            Float::F32 => "f32",
+        }
+    }
+}
+
+/// A float literal (unsuffixed, so it takes the type `Real` of its context),
+/// written with the shortest digits that round-trip in `float`.
+pub fn float_literal(value: f64, float: Float) -> TokenStream {
     assert!(value.is_finite(), "non-finite constant reached the emitter");
-    let lit = Literal::f64_unsuffixed(value.abs());
+    let lit = match float {
+        Float::F64 => Literal::f64_unsuffixed(value.abs()),
+        Float::F32 => Literal::f32_unsuffixed(value.abs() as f32),
+    };
     if value.is_sign_negative() {
         quote!(-#lit)
     } else {
@@ -35,7 +57,7 @@ pub fn float_literal(value: f64) -> TokenStream {
 
 impl<'g> Emitter<'g> {
     /// `vars[i]` is the token expression for graph variable `i`.
-    pub fn new(g: &'g Graph, vars: Vec<TokenStream>) -> Self {
+    pub fn new(g: &'g Graph, vars: Vec<TokenStream>, float: Float) -> Self {
         assert_eq!(vars.len(), g.var_count(), "one token per variable");
         Self {
             g,
@@ -44,6 +66,7 @@ impl<'g> Emitter<'g> {
             statements: Vec::new(),
             next: 0,
             prefix: "t".into(),
+            float,
             used_functions: BTreeSet::new(),
         }
     }
@@ -76,7 +99,7 @@ impl<'g> Emitter<'g> {
 
     fn bind(&mut self, id: Id) -> TokenStream {
         let rhs = match self.g.node(id) {
-            Node::Const(bits) => return float_literal(f64::from_bits(bits)),
+            Node::Const(bits) => return float_literal(f64::from_bits(bits), self.float),
             Node::Var(v) => return self.vars[v as usize].clone(),
             Node::Add(a, b) => {
                 let (a, b) = (self.get(a), self.get(b));
