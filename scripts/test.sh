@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Run every test of uavgen: the README's test command, and what CI runs.
+#  1. installs what the tests need (the thumbv7em target, clippy, rustfmt);
+#  2. checks formatting and clippy;
+#  3. regenerates generated/ and fails if the checked-in crates differ;
+#  4. builds the no_std crates for thumbv7em-none-eabihf;
+#  5. runs all unit, property, reference and CLI tests (release build).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+echo "== setup"
+rustup target add thumbv7em-none-eabihf >/dev/null
+rustup component add clippy rustfmt >/dev/null 2>&1 || true
+
+echo "== format and lints"
+cargo fmt --all -- --check
+cargo clippy --workspace --all-targets --release -q -- -D warnings
+
+echo "== generated/ is up to date"
+scripts/regenerate.sh
+if ! git diff --exit-code --stat -- generated/ || [ -n "$(git status --porcelain -- generated/)" ]; then
+    echo "generated/ differs from what the generator produces: run scripts/regenerate.sh and commit" >&2
+    git status --porcelain -- generated/ >&2
+    exit 1
+fi
+
+echo "== no_std crates build for thumbv7em-none-eabihf"
+cargo build --release -q --target thumbv7em-none-eabihf \
+    -p uavgen-templates -p uavgen-runtime -p pd_paper -p pd_hover -p pd_hover_f32 -p sindy_m100
+
+echo "== tests"
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+cargo test --workspace --release 2>&1 | tee "$log"
+# One closing line over all test binaries (cargo prints one per binary).
+awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($i ~ /^passed/) p += $(i-1); if ($i ~ /^failed/) f += $(i-1) } }
+     END { printf "tests: %d passed, %d failed\n", p, f }' "$log"
