@@ -156,8 +156,26 @@ impl Graph {
             (_, Some(-1.0)) => return self.neg(a),
             _ => {}
         }
+        // c·(c'·y) = (c c')·y: keep one constant factor per product.
+        if let Some((c, other)) = self.const_and_other(a, b) {
+            if let Node::Mul(p, q) = self.node(other) {
+                if let Some((c2, y)) = self.const_and_other(p, q) {
+                    let cc = self.constant(c * c2);
+                    return self.mul(cc, y);
+                }
+            }
+        }
         let (a, b) = if a <= b { (a, b) } else { (b, a) };
         self.intern(Node::Mul(a, b))
+    }
+
+    /// (c, other) when exactly one of a, b is a constant c.
+    fn const_and_other(&self, a: Id, b: Id) -> Option<(f64, Id)> {
+        match (self.as_const(a), self.as_const(b)) {
+            (Some(c), None) => Some((c, b)),
+            (None, Some(c)) => Some((c, a)),
+            _ => None,
+        }
     }
 
     /// −a
@@ -290,6 +308,9 @@ mod tests {
         assert_eq!(g.add(x, zero), x);
         let nx = g.neg(x);
         assert_eq!(g.neg(nx), x);
+        let two_x = g.mul(two, x);
+        let six_x = g.mul(three, two_x);
+        assert_eq!(six_x, g.mul(x, six), "constant factors merge");
         assert_eq!(g.powi(x, 1), x);
         let eight = g.powi(two, 3);
         assert_eq!(g.as_const(eight), Some(8.0));
