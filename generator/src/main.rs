@@ -74,6 +74,9 @@ struct ImportArgs {
     /// How rows PySINDy did not fit are completed.
     #[arg(long, value_enum, default_value_t = KinematicArg::Auto)]
     kinematic: KinematicArg,
+    /// Overwrite --out if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -164,6 +167,9 @@ fn import_pysindy(args: ImportArgs) -> Result<(), String> {
         },
         drop_below: 0.0,
     };
+    if args.out.exists() && !args.force {
+        return Err(format!("{}: exists; pass --force to overwrite it", args.out.display()));
+    }
     let file = import(&text, &label, &options).map_err(|e| e.to_string())?;
     let json = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())? + "\n";
     // Validate the result exactly as `--model` would read it before writing anything.
@@ -184,6 +190,11 @@ fn import_pysindy(args: ImportArgs) -> Result<(), String> {
 }
 
 fn check(args: CheckArgs) -> Result<(), String> {
+    let rate = GenerateOptions {
+        rate_hz: args.rate,
+        ..GenerateOptions::default()
+    };
+    rate.validate().map_err(|e| e.to_string())?;
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
     let ir = uavgen::ModelIr::new(&model);
     println!(
@@ -200,12 +211,6 @@ fn check(args: CheckArgs) -> Result<(), String> {
         ir.jacobian_nonzeros(),
         model.nx() * (model.nx() + model.nu())
     );
-    if !(args.rate.is_finite() && args.rate > 0.0) {
-        return Err(format!(
-            "--rate: must be a positive sample rate in Hz, got {}",
-            args.rate
-        ));
-    }
     let choice = uavgen::discretize::auto_substeps(&ir, 1.0 / args.rate, &uavgen::discretize::Envelope::default())
         .map_err(|e| e.to_string())?;
     println!(

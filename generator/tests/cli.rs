@@ -256,6 +256,53 @@ fn import_pysindy_fixture_round_trips() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("unknown variable 'rol'"), "{}", stderr(&o));
     assert!(!out2.exists());
+
+    // NaN (as Python's json writes it) is named as such.
+    let nan = tmp.path().join("nan.json");
+    fs::write(
+        &nan,
+        fs::read_to_string(&fixture)
+            .unwrap()
+            .replacen("9.809999999999999", "NaN", 1),
+    )
+    .unwrap();
+    let o = uavgen(&[
+        "import-pysindy",
+        "--input",
+        nan.to_str().unwrap(),
+        "--name",
+        "toy",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("non-finite number"), "{}", stderr(&o));
+    assert!(!out2.exists());
+
+    // An existing output is only replaced with --force.
+    let o = uavgen(&[
+        "import-pysindy",
+        "--input",
+        fixture.to_str().unwrap(),
+        "--name",
+        "toy",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("--force"), "{}", stderr(&o));
+    let o = uavgen(&[
+        "import-pysindy",
+        "--input",
+        fixture.to_str().unwrap(),
+        "--name",
+        "toy",
+        "--out",
+        out.to_str().unwrap(),
+        "--force",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Coefficients keep every bit (serde_json float_roundtrip).
+    assert!(fs::read_to_string(&out).unwrap().contains("9.809999999999999"));
 }
 
 #[test]

@@ -81,3 +81,17 @@ fn automatic_choice_is_stable_where_the_continuous_model_is() {
         eprintln!("{name}: M = {m}, {checked} locally stable points checked");
     }
 }
+
+#[test]
+fn models_whose_jacobians_stall_schur_still_get_a_substep_count() {
+    // ẋ = −vx³ and friends: nalgebra's uncapped Schur iteration never returned on these.
+    let text = r#"{"format": "uavgen-model/1", "kind": "sindy", "name": "cube",
+        "library": ["vx^3", "vx*roll", "sin(roll)^2"], "kinematic": [["x", "vx"]],
+        "coefficients": [{"state": "vx", "term": "vx^3", "coefficient": -1.0},
+                         {"state": "vy", "term": "vx*roll", "coefficient": -1.0},
+                         {"state": "vz", "term": "sin(roll)^2", "coefficient": 1.0}]}"#;
+    let ir = ModelIr::new(&uavgen::model::parse(text, "cube.json").unwrap());
+    let choice = auto_substeps(&ir, 1.0 / 30.0, &Envelope::default()).unwrap();
+    // ∂(−vx³)/∂vx = −3 vx² reaches −75 1/s at |vx| = 5: 75·1.25/30 = 3.1 > 2.785 → M = 2.
+    assert_eq!(choice.substeps, 2);
+}

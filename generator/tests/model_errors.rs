@@ -264,15 +264,29 @@ fn unknown_fields_and_bad_values() {
     assert_err(
         &PD.replace("0.05, 0.05, 0.09", "0.05, 0.0, 0.09"),
         K::BadValue,
-        "xi15",
-        &["Iy", "positive"],
+        "xi[14]",
+        &["ξ15 = Iy", "positive"],
     );
     assert_err(
         &PD.replace("1, 0, 0, 23.544", "1, -2.4, 0, 23.544"),
         K::BadValue,
-        "xi11",
-        &["singular"],
+        "xi[10]",
+        &["ξ11", "singular"],
     );
+    assert_err(
+        &PD.replace("1, 0, 0, 23.544", "1, 2.5, 0, 23.544"),
+        K::BadValue,
+        "xi[10]",
+        &["ξ11", "singular"],
+    );
+    assert_err(
+        &PD.replace("1, 0, 0, 23.544", "1, 0, -0.07, 23.544"),
+        K::BadValue,
+        "xi[11]",
+        &["ξ12", "singular"],
+    );
+    let named = PD.replace("[1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 23.544, 0.05, 0.05, 0.09]", r#"{"xi1": 1, "xi2": 1, "xi3": 1, "xi4": 1, "xi5": 1, "xi6": 1, "xi7": 1, "xi8": 1, "xi9": 1, "xi10": 1, "xi11": 0, "xi12": 0, "xi13": 23.544, "xi14": -0.05, "xi15": 0.05, "xi16": 0.09}"#);
+    assert_err(&named, K::BadValue, "xi.xi14", &["ξ14 = Ix"]);
     assert_err(
         &PD.replace(r#""mass": 2.4"#, r#""mass": "heavy""#),
         K::BadValue,

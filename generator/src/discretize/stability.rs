@@ -8,10 +8,17 @@
 //! between the sampled points. Eigenvalues with Re λ ≥ 0 (modes that are
 //! not stable in continuous time, e.g. the free integrators of position)
 //! impose nothing.
+//!
+//! Eigenvalues come from a Schur decomposition with an iteration cap. If it
+//! does not converge (nalgebra's QR iteration can stall on some exactly
+//! structured matrices), it is retried on a perturbation of relative size
+//! 1e-12; if that fails too, every eigenvalue is assumed to lie anywhere in
+//! the left half-disc of radius ‖A‖∞ (which bounds the spectral radius), a
+//! conservative choice.
 
 use super::Envelope;
 use crate::ir::ModelIr;
-use nalgebra::{Complex, DMatrix};
+use nalgebra::{Complex, DMatrix, Schur};
 
 /// Margin on |hλ| when testing RK4's stability region.
 pub const SAFETY_FACTOR: f64 = 1.25;
@@ -36,8 +43,37 @@ pub struct SubstepChoice {
 pub enum SubstepError {
     #[error("∂f/∂x is not finite at envelope point {0:?} (the model is singular there)")]
     NonFinite(Vec<f64>),
-    #[error("explicit RK4 would need more than {MAX_SUBSTEPS} substeps at this rate (stiffest eigenvalue {0}); pass --substeps explicitly")]
+    #[error("explicit RK4 would need more than {MAX_SUBSTEPS} substeps at this rate (eigenvalue {0} 1/s); pass --substeps explicitly")]
     TooStiff(Complex<f64>),
+}
+
+/// Schur iterations before giving up on one matrix.
+const MAX_SCHUR_ITERATIONS: usize = 10_000;
+
+/// Eigenvalues of `a`, or — if the Schur iteration stalls twice — a
+/// conservative cover of the left half-disc of radius ‖A‖∞.
+fn eigenvalues(a: &DMatrix<f64>) -> Vec<Complex<f64>> {
+    let schur = |m: DMatrix<f64>| Schur::try_new(m, f64::EPSILON, MAX_SCHUR_ITERATIONS);
+    if let Some(s) = schur(a.clone()) {
+        return s.complex_eigenvalues().iter().copied().collect();
+    }
+    let n = a.nrows();
+    let scale = 1e-12 * a.amax().max(1.0);
+    // Deterministic, unstructured perturbation.
+    let perturbed = a + DMatrix::from_fn(n, n, |i, j| scale * (((7 * i + 3 * j) % 11) as f64 - 5.0) / 5.0);
+    if let Some(s) = schur(perturbed) {
+        return s.complex_eigenvalues().iter().copied().collect();
+    }
+    let radius = a
+        .row_iter()
+        .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    (0..=32)
+        .map(|k| {
+            let theta = std::f64::consts::FRAC_PI_2 * (1.0 + k as f64 / 16.0);
+            Complex::from_polar(radius, theta) - Complex::new(1e-12, 0.0)
+        })
+        .collect()
 }
 
 fn stable_with(m: usize, lambda: Complex<f64>, h: f64) -> bool {
@@ -60,7 +96,7 @@ pub fn auto_substeps(ir: &ModelIr, dt: f64, envelope: &Envelope) -> Result<Subst
         if a.iter().any(|v| !v.is_finite()) {
             return Err(SubstepError::NonFinite(p.clone()));
         }
-        for lambda in a.complex_eigenvalues().iter().copied() {
+        for lambda in eigenvalues(&a) {
             if lambda.re >= 0.0 {
                 continue;
             }
@@ -88,6 +124,19 @@ mod tests {
         // Imaginary axis: stable up to 2√2.
         assert!(rk4_stability_function(Complex::new(0.0, 2.8)).norm() <= 1.0);
         assert!(rk4_stability_function(Complex::new(0.0, 2.9)).norm() > 1.0);
+    }
+
+    #[test]
+    fn stalled_schur_iterations_do_not_hang() {
+        // The Jacobian of ẋ = −vx³ at vx = 0 style matrices made nalgebra's
+        // uncapped Schur loop spin forever; capped, it must return.
+        let mut a = DMatrix::zeros(12, 12);
+        for i in 0..6 {
+            a[(i, i + 6)] = 1.0;
+        }
+        let l = eigenvalues(&a);
+        assert_eq!(l.len(), 12);
+        assert!(l.iter().all(|z| z.norm() < 1e-3 || z.re < 0.0));
     }
 
     #[test]

@@ -75,7 +75,7 @@ pub(crate) fn hex_sha256(bytes: &[u8]) -> String {
     Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
 }
 
-fn json_syntax_error(text: &str, label: &str, e: &serde_json::Error) -> ModelError {
+pub(crate) fn json_syntax_error(text: &str, label: &str, e: &serde_json::Error) -> ModelError {
     let at = format!("line {}, column {}", e.line(), e.column());
     // JSON has no NaN/Infinity; Python's json module writes them anyway.
     let line = text.lines().nth(e.line().saturating_sub(1)).unwrap_or("");
@@ -253,36 +253,32 @@ fn validate_pd(f: PdFile, label: &str, source: Source) -> Result<Model, ModelErr
         }
     }
     let p = PdParams { mass, gravity, xi };
+    // Locations name ξk the way the file wrote it.
+    let loc = |k: usize| {
+        if f.xi.is_array() {
+            format!("xi[{}]", k - 1)
+        } else {
+            format!("xi.xi{k}")
+        }
+    };
     for (k, what) in [(14, "Ix"), (15, "Iy"), (16, "Iz")] {
         if p.xi(k) <= 0.0 {
             return Err(ModelError::new(
                 label,
-                format!("xi{k}"),
+                loc(k),
                 K::BadValue,
                 format!("ξ{k} = {what} is an inertia and must be positive, found {}", p.xi(k)),
             ));
         }
     }
-    // (m I + ξ11 b e3ᵀ) is singular where m + ξ11 cos φ cos θ = 0, cos φ cos θ ∈ (0, 1].
-    if mass + p.xi(11).min(0.0) <= 0.0 {
-        return Err(ModelError::new(
-            label,
-            "xi11",
-            K::BadValue,
-            format!(
-                "ξ11 = {} ≤ −m makes m + ξ11 cos φ cos θ vanish: the vertical mass matrix is singular",
-                p.xi(11)
-            ),
-        ));
+    // (m I + ξ11 b e3ᵀ) is singular where m + ξ11 cos φ cos θ = 0; cos φ cos θ
+    // ranges over [−1, 1], so |ξ11| < m keeps it invertible at every attitude.
+    if p.xi(11).abs() >= mass {
+        return Err(ModelError::new(label, loc(11), K::BadValue, format!("|ξ11| = {} ≥ m = {mass}: m + ξ11 cos φ cos θ vanishes at some attitude and the translational mass matrix is singular", p.xi(11).abs())));
     }
-    // Rotational mass matrix M(Ω) + diag(0, 0, ξ12) at hover is diag(Ix, Iy, Iz + ξ12).
-    if p.xi(16) + p.xi(12) <= 0.0 {
-        return Err(ModelError::new(
-            label,
-            "xi12",
-            K::BadValue,
-            format!("ξ12 = {} ≤ −Iz makes the yaw mass matrix singular", p.xi(12)),
-        ));
+    // M(Ω) + diag(0, 0, ξ12) is positive definite wherever M(Ω) is (|θ| < π/2) iff ξ12 ≥ 0.
+    if p.xi(12) < 0.0 {
+        return Err(ModelError::new(label, loc(12), K::BadValue, format!("ξ12 = {} < 0: M(Ω) + diag(0, 0, ξ12) becomes singular at attitudes where M(Ω) is not (yaw acceleration feedback must be ≥ 0)", p.xi(12))));
     }
     Ok(Model {
         name: name(label, f.name)?,

@@ -48,14 +48,8 @@ pub struct ImportOptions {
 
 /// Convert an export (its text, `label` naming the file) to a model file.
 pub fn import(text: &str, label: &str, options: &ImportOptions) -> Result<SindyFile, ModelError> {
-    let export: PysindyExport = serde_json::from_str(text).map_err(|e| {
-        ModelError::new(
-            label,
-            format!("line {}, column {}", e.line(), e.column()),
-            K::Json,
-            e.to_string(),
-        )
-    })?;
+    let export: PysindyExport =
+        serde_json::from_str(text).map_err(|e| super::load::json_syntax_error(text, label, &e))?;
     let states = export
         .states
         .clone()

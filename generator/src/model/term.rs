@@ -11,6 +11,9 @@
 use crate::symbolic::{Graph, Id};
 use std::fmt;
 
+/// Largest power of one factor.
+pub const MAX_POWER: u32 = 16;
+
 /// The base of one factor.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Base {
@@ -109,25 +112,22 @@ pub fn parse_term(text: &str, vars: &[String]) -> Result<Term, TermError> {
     let mut factors: Vec<(Base, u32)> = Vec::new();
     loop {
         let at = lx.pos;
-        let name = lx.ident().ok_or_else(|| {
-            syntax(format!(
-                "expected a variable, sin(..) or cos(..) at column {} of '{trimmed}'",
-                at + 1
-            ))
-        })?;
+        let name = lx
+            .ident()
+            .ok_or_else(|| syntax(format!("expected a variable, sin(..) or cos(..) at column {}", at + 1)))?;
         let base = match name {
             "sin" | "cos" => {
                 lx.skip_ws();
                 if !lx.eat('(') {
-                    return Err(syntax(format!("expected '(' after '{name}' in '{trimmed}'")));
+                    return Err(syntax(format!("expected '(' after '{name}'")));
                 }
                 lx.skip_ws();
                 let arg = lx
                     .ident()
-                    .ok_or_else(|| syntax(format!("{name}(..) takes a variable name in '{trimmed}'")))?;
+                    .ok_or_else(|| syntax(format!("{name}(..) takes a variable name")))?;
                 lx.skip_ws();
                 if !lx.eat(')') {
-                    return Err(syntax(format!("expected ')' after {name}({arg} in '{trimmed}'")));
+                    return Err(syntax(format!("expected ')' after {name}({arg}")));
                 }
                 let v = lookup(arg)?;
                 if name == "sin" {
@@ -144,16 +144,21 @@ pub fn parse_term(text: &str, vars: &[String]) -> Result<Term, TermError> {
             lx.skip_ws();
             let digits = lx
                 .integer()
-                .ok_or_else(|| syntax(format!("expected a positive integer power after '^' in '{trimmed}'")))?;
+                .ok_or_else(|| syntax(format!("expected a positive integer power after '^'")))?;
             power = digits
                 .parse::<u32>()
                 .ok()
-                .filter(|&p| (1..=16).contains(&p))
-                .ok_or_else(|| syntax(format!("power {digits} out of range 1..=16 in '{trimmed}'")))?;
+                .filter(|&p| (1..=MAX_POWER).contains(&p))
+                .ok_or_else(|| syntax(format!("power {digits} out of range 1..={MAX_POWER}")))?;
+            // The separator after a factor is what follows its power.
+            had_ws = false;
         }
         match factors.iter_mut().find(|(b, _)| *b == base) {
             Some((_, p)) => *p += power,
             None => factors.push((base, power)),
+        }
+        if factors.iter().any(|&(_, p)| p > MAX_POWER) {
+            return Err(syntax(format!("combined power of a factor exceeds {MAX_POWER}")));
         }
         had_ws |= lx.skip_ws();
         if lx.pos == trimmed.len() {
@@ -163,7 +168,7 @@ pub fn parse_term(text: &str, vars: &[String]) -> Result<Term, TermError> {
             lx.skip_ws();
         } else if !had_ws {
             return Err(syntax(format!(
-                "unexpected '{}' at column {} of '{trimmed}'",
+                "unexpected '{}' at column {}",
                 lx.peek().unwrap_or(' '),
                 lx.pos + 1
             )));
