@@ -144,7 +144,7 @@ pub fn parse_term(text: &str, vars: &[String]) -> Result<Term, TermError> {
             lx.skip_ws();
             let digits = lx
                 .integer()
-                .ok_or_else(|| syntax(format!("expected a positive integer power after '^'")))?;
+                .ok_or_else(|| syntax("expected a positive integer power after '^'".into()))?;
             power = digits
                 .parse::<u32>()
                 .ok()
