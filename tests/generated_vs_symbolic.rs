@@ -20,6 +20,10 @@ macro_rules! check_model {
                 let generic = discrete_step(&ir, &x, &u, $krate::DT, $krate::SUBSTEPS);
                 worst_step = worst_step.max(max_scaled_error(&generated, &generic));
             }
+            eprintln!(
+                "{}: worst scaled error: continuous {worst_f:.1e}, discrete {worst_step:.1e}",
+                $model
+            );
             assert!(
                 worst_f <= 1e-12,
                 "{}: continuous dynamics differ by {worst_f:e}",
@@ -53,6 +57,7 @@ fn f32_crate_tracks_the_f64_model() {
         let ur = uf.map(f64::from);
         worst = worst.max(max_scaled_error(&generated, &ir.eval_f(&xr, &ur)));
     }
+    eprintln!("pd_hover_f32: worst scaled error vs f64 symbolic {worst:.1e}");
     assert!(worst <= 1e-4, "f32 dynamics differ by {worst:e}");
 }
 

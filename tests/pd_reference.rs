@@ -114,6 +114,10 @@ macro_rules! reference_test {
                 let generated = $krate::continuous_dynamics(&x, &u);
                 worst = worst.max(max_scaled_error(&generated, &reference_dynamics(&p, &x, &u)));
             }
+            eprintln!(
+                "{}: worst scaled error vs hand-written nalgebra {worst:.1e}",
+                $model
+            );
             assert!(
                 worst <= 1e-10,
                 "{}: generated vs hand-written nalgebra differ by {worst:e}",
