@@ -9,8 +9,10 @@ pub mod codegen;
 pub mod discretize;
 pub mod ir;
 pub mod model;
+pub mod mpc_options;
 pub mod symbolic;
 
 pub use codegen::{generate, Float, GenerateOptions, GeneratedCrate};
 pub use ir::ModelIr;
 pub use model::{load, Model};
+pub use mpc_options::MpcOptions;

@@ -1,0 +1,117 @@
+//! MPC problem options (`uavgen --mpc options.json`): weights, input bounds and
+//! solver limits, with the paper's defaults. See docs/mpc.md.
+
+use crate::model::Model;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+use std::path::Path;
+
+/// The options file as written (every field optional).
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MpcOptionsFile {
+    pub q: Option<Vec<f64>>,
+    pub q_terminal: Option<Vec<f64>>,
+    pub r: Option<Vec<f64>>,
+    pub u_min: Option<Vec<f64>>,
+    pub u_max: Option<Vec<f64>>,
+    pub max_qp_iterations: Option<usize>,
+    pub regularisation: Option<f64>,
+}
+
+/// Validated options for one model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MpcOptions {
+    /// Stage weights diag(Q), k = 0..N−1.
+    pub q: Vec<f64>,
+    /// Terminal weights diag(Q_N).
+    pub q_terminal: Vec<f64>,
+    /// Input weights diag(R).
+    pub r: Vec<f64>,
+    pub u_min: Vec<f64>,
+    pub u_max: Vec<f64>,
+    /// Hard cap on active-set iterations per QP.
+    pub max_qp_iterations: usize,
+    /// Added to the condensed Hessian's diagonal.
+    pub regularisation: f64,
+}
+
+/// Default weight of a state: 2 on positions x, y, z (by name), 0 elsewhere.
+fn default_q(model: &Model) -> Vec<f64> {
+    model.states.iter().map(|s| if matches!(s.as_str(), "x" | "y" | "z") { 2.0 } else { 0.0 }).collect()
+}
+
+/// Default bound of an input by name (the paper's), ±1 for other names.
+fn default_bound(name: &str) -> f64 {
+    match name {
+        "u_vz" => 5.0,
+        "u_roll" | "u_pitch" => 0.611,
+        "u_yaw_rate" => 5.0 * PI / 6.0,
+        _ => 1.0,
+    }
+}
+
+impl MpcOptions {
+    /// The paper's defaults for `model`.
+    pub fn defaults(model: &Model) -> Self {
+        let q = default_q(model);
+        Self {
+            q_terminal: q.clone(),
+            q,
+            r: vec![0.1; model.nu()],
+            u_min: model.inputs.iter().map(|n| -default_bound(n)).collect(),
+            u_max: model.inputs.iter().map(|n| default_bound(n)).collect(),
+            max_qp_iterations: 200,
+            regularisation: 1e-9,
+        }
+    }
+
+    /// Defaults overridden by `file`, validated; `label` names the file in errors.
+    pub fn from_file(model: &Model, file: MpcOptionsFile, label: &str) -> Result<Self, String> {
+        let d = Self::defaults(model);
+        let (nx, nu) = (model.nx(), model.nu());
+        let vector = |field: &str, v: Option<Vec<f64>>, default: Vec<f64>, n: usize| -> Result<Vec<f64>, String> {
+            let v = v.unwrap_or(default);
+            if v.len() != n {
+                return Err(format!("{label}: {field}: expected {n} values, found {}", v.len()));
+            }
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(format!("{label}: {field}[{i}]: non-finite value"));
+            }
+            Ok(v)
+        };
+        let q = vector("q", file.q, d.q, nx)?;
+        let q_terminal = vector("q_terminal", file.q_terminal, q.clone(), nx)?;
+        let r = vector("r", file.r, d.r, nu)?;
+        let u_min = vector("u_min", file.u_min, d.u_min, nu)?;
+        let u_max = vector("u_max", file.u_max, d.u_max, nu)?;
+        for (field, v) in [("q", &q), ("q_terminal", &q_terminal), ("r", &r)] {
+            if let Some(i) = v.iter().position(|&x| x < 0.0) {
+                return Err(format!("{label}: {field}[{i}]: weights must be ≥ 0, found {}", v[i]));
+            }
+        }
+        if let Some(i) = (0..nu).find(|&i| u_min[i] >= u_max[i]) {
+            return Err(format!(
+                "{label}: u_min[{i}] = {} must be below u_max[{i}] = {} (input '{}')",
+                u_min[i], u_max[i], model.inputs[i]
+            ));
+        }
+        let max_qp_iterations = file.max_qp_iterations.unwrap_or(d.max_qp_iterations);
+        if max_qp_iterations == 0 {
+            return Err(format!("{label}: max_qp_iterations must be at least 1"));
+        }
+        let regularisation = file.regularisation.unwrap_or(d.regularisation);
+        if !(regularisation.is_finite() && regularisation >= 0.0) {
+            return Err(format!("{label}: regularisation must be finite and ≥ 0, found {regularisation}"));
+        }
+        Ok(Self { q, q_terminal, r, u_min, u_max, max_qp_iterations, regularisation })
+    }
+
+    /// Read and validate an options file for `model`.
+    pub fn load(model: &Model, path: &Path) -> Result<Self, String> {
+        let label = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{label}: cannot read: {e}"))?;
+        let file: MpcOptionsFile = serde_json::from_str(&text).map_err(|e| format!("{label}: {e}"))?;
+        Self::from_file(model, file, &label)
+    }
+}
