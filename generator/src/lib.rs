@@ -10,6 +10,7 @@ pub mod discretize;
 pub mod ir;
 pub mod model;
 pub mod mpc_options;
+pub mod reference;
 pub mod symbolic;
 
 pub use codegen::{generate, Float, GenerateOptions, GeneratedCrate};

@@ -52,6 +52,9 @@ struct GenerateArgs {
     /// Output directory (default: ./<crate name>).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// MPC options file: weights, input bounds, QP limits (default: the paper's; see docs/mpc.md).
+    #[arg(long)]
+    mpc: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -116,7 +119,12 @@ fn main() -> ExitCode {
 fn generate(args: GenerateArgs) -> Result<(), String> {
     let path = args.model.ok_or("--model is required (see `uavgen --help`)")?;
     let model = uavgen::load(&path).map_err(|e| e.to_string())?;
+    let mpc = match &args.mpc {
+        Some(p) => Some(uavgen::MpcOptions::load(&model, p)?),
+        None => None,
+    };
     let options = GenerateOptions {
+        mpc,
         horizon: args.horizon,
         rate_hz: args.rate,
         substeps: args.substeps,

@@ -14,3 +14,19 @@ pub const N: usize = 30;
 pub const DT: Real = 0.1;
 /// RK4 substeps per sample.
 pub const SUBSTEPS: usize = 2;
+/// QP variables: the N·NU inputs of the horizon.
+pub const NV: usize = N * NU;
+/// Stage state weights diag(Q).
+pub const Q: [Real; NX] = [1.0, 0.0];
+/// Terminal state weights diag(Q_N).
+pub const Q_TERMINAL: [Real; NX] = [1.0, 0.0];
+/// Input weights diag(R).
+pub const R: [Real; NU] = [0.1];
+/// Lower input bounds.
+pub const U_MIN: [Real; NU] = [-1.0];
+/// Upper input bounds.
+pub const U_MAX: [Real; NU] = [1.0];
+/// Hard cap on active-set iterations per QP.
+pub const MAX_QP_ITERATIONS: usize = 200;
+/// Added to the diagonal of the condensed Hessian.
+pub const REGULARISATION: Real = 1e-9;

@@ -12,8 +12,11 @@
 mod dims;
 pub mod math;
 pub mod model;
+pub mod mpc;
+pub mod qp;
 pub mod rk4;
 
 pub use dims::*;
 pub use model::{continuous_dynamics, continuous_jacobians};
+pub use mpc::{Mpc, Solution, Status};
 pub use rk4::{discrete_dynamics, discrete_jacobians, discrete_linearization};

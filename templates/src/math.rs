@@ -15,6 +15,12 @@ pub fn cos(x: Real) -> Real {
     Libm::<Real>::cos(x)
 }
 
+/// √x
+#[inline]
+pub fn sqrt(x: Real) -> Real {
+    Libm::<Real>::sqrt(x)
+}
+
 /// xⁿ by repeated squaring, n ≥ 0.
 #[inline]
 pub fn powi(x: Real, n: u32) -> Real {

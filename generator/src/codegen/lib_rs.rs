@@ -3,13 +3,23 @@
 use super::GenerateOptions;
 use crate::ir::ModelIr;
 use crate::model::Model;
+use crate::mpc_options::MpcOptions;
 use crate::symbolic::float_literal;
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
 use std::collections::BTreeMap;
 
 /// Values of the constants of `templates/src/dims.rs`.
-pub fn dims_values(ir: &ModelIr, options: &GenerateOptions, substeps: usize) -> BTreeMap<&'static str, TokenStream> {
+pub fn dims_values(
+    ir: &ModelIr,
+    options: &GenerateOptions,
+    substeps: usize,
+    mpc: &MpcOptions,
+) -> BTreeMap<&'static str, TokenStream> {
+    let array = |values: &[f64]| {
+        let items = values.iter().map(|&v| float_literal(v, options.float));
+        quote!([#(#items),*])
+    };
     let lit = |n: usize| {
         let l = Literal::usize_unsuffixed(n);
         quote!(#l)
@@ -20,6 +30,13 @@ pub fn dims_values(ir: &ModelIr, options: &GenerateOptions, substeps: usize) -> 
         ("N", lit(options.horizon)),
         ("DT", float_literal(1.0 / options.rate_hz, options.float)),
         ("SUBSTEPS", lit(substeps)),
+        ("Q", array(&mpc.q)),
+        ("Q_TERMINAL", array(&mpc.q_terminal)),
+        ("R", array(&mpc.r)),
+        ("U_MIN", array(&mpc.u_min)),
+        ("U_MAX", array(&mpc.u_max)),
+        ("MAX_QP_ITERATIONS", lit(mpc.max_qp_iterations)),
+        ("REGULARISATION", float_literal(mpc.regularisation, options.float)),
     ])
 }
 
@@ -48,10 +65,15 @@ pub fn emit(model: &Model, ir: &ModelIr) -> TokenStream {
         mod model;
         #[rustfmt::skip]
         mod rk4;
+        #[rustfmt::skip]
+        mod qp;
+        #[rustfmt::skip]
+        mod mpc;
 
         pub use dims::*;
         pub use model::{continuous_dynamics, continuous_jacobians};
         pub use rk4::{discrete_dynamics, discrete_jacobians, discrete_linearization};
+        pub use mpc::{Mpc, Solution, Status};
 
         /// State names, in state order.
         pub const STATE_NAMES: [&str; NX] = [#(#states),*];

@@ -11,6 +11,7 @@ pub mod write;
 use crate::discretize::{auto_substeps, Envelope, SubstepChoice, SubstepError};
 use crate::ir::ModelIr;
 use crate::model::Model;
+use crate::mpc_options::MpcOptions;
 use proc_macro2::TokenStream;
 use std::path::PathBuf;
 
@@ -30,6 +31,8 @@ pub struct GenerateOptions {
     pub crate_name: Option<String>,
     /// Operating envelope for the automatic substep rule.
     pub envelope: Envelope,
+    /// MPC weights, bounds and limits; `None`: the paper's defaults for the model.
+    pub mpc: Option<MpcOptions>,
 }
 
 impl Default for GenerateOptions {
@@ -41,6 +44,7 @@ impl Default for GenerateOptions {
             float: Float::F64,
             crate_name: None,
             envelope: Envelope::default(),
+            mpc: None,
         }
     }
 }
@@ -143,10 +147,19 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         .crate_name
         .clone()
         .unwrap_or_else(|| default_crate_name(&model.name));
-    let head = header::lines(model, options, substeps);
+    let mpc = match &options.mpc {
+        Some(m) => {
+            if m.q.len() != model.nx() || m.q_terminal.len() != model.nx() || m.r.len() != model.nu() {
+                return Err(invalid("mpc", "the MPC options were made for a model of other sizes"));
+            }
+            m.clone()
+        }
+        None => MpcOptions::defaults(model),
+    };
+    let head = header::lines(model, options, substeps, &mpc);
     let rs_header = header::rust(&head);
 
-    let dims = splice::specialise_dims(options.float.name(), &lib_rs::dims_values(&ir, options, substeps))
+    let dims = splice::specialise_dims(options.float.name(), &lib_rs::dims_values(&ir, options, substeps, &mpc))
         .map_err(GenerateError::Template)?;
     let (model_tokens, used_math) = model_rs::emit(&ir, options.float);
     let mut files = vec![
@@ -175,10 +188,9 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
             rs_header.clone() + &prettyplease::unparse(&splice::math(&used_math)),
         ),
     ];
-    files.push((
-        PathBuf::from("src/rk4.rs"),
-        rs_header + &prettyplease::unparse(&splice::template(splice::RK4_RS)),
-    ));
+    for (name, source) in [("src/rk4.rs", splice::RK4_RS), ("src/qp.rs", splice::QP_RS), ("src/mpc.rs", splice::MPC_RS)] {
+        files.push((PathBuf::from(name), rs_header.clone() + &prettyplease::unparse(&splice::template(source))));
+    }
     Ok(GeneratedCrate {
         crate_name,
         substeps,

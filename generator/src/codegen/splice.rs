@@ -14,6 +14,11 @@ use syn::{File, Item};
 pub const DIMS_RS: &str = include_str!("../../../templates/src/dims.rs");
 pub const MATH_RS: &str = include_str!("../../../templates/src/math.rs");
 pub const RK4_RS: &str = include_str!("../../../templates/src/rk4.rs");
+pub const QP_RS: &str = include_str!("../../../templates/src/qp.rs");
+pub const MPC_RS: &str = include_str!("../../../templates/src/mpc.rs");
+
+/// Constants of `dims.rs` defined by expressions of the others (kept as written).
+const DERIVED: &[&str] = &["NZ", "NV"];
 
 fn is_cfg_test(attrs: &[syn::Attribute]) -> bool {
     attrs
@@ -38,13 +43,17 @@ pub fn template(source: &str) -> File {
     file
 }
 
-/// `math.rs` with only the functions in `used`.
+/// Math functions the spliced solver modules call themselves.
+const SOLVER_MATH: &[&str] = &["sqrt"];
+
+/// `math.rs` with only the functions in `used` and those the solver needs.
 pub fn math(used: &std::collections::BTreeSet<&'static str>) -> File {
     let mut file = template(MATH_RS);
     let mut any = false;
     file.items.retain(|item| match item {
         Item::Fn(f) => {
-            let keep = used.contains(f.sig.ident.to_string().as_str());
+            let name = f.sig.ident.to_string();
+            let keep = used.contains(name.as_str()) || SOLVER_MATH.contains(&name.as_str());
             any |= keep;
             keep
         }
@@ -72,7 +81,7 @@ pub fn specialise_dims(real: &str, values: &BTreeMap<&str, TokenStream>) -> Resu
                 if let Some(v) = values.get(name.as_str()) {
                     *c.expr = syn::parse2(v.clone()).map_err(|e| format!("value of {name}: {e}"))?;
                     seen.push(name);
-                } else if name != "NZ" {
+                } else if !DERIVED.contains(&name.as_str()) {
                     return Err(format!(
                         "templates/src/dims.rs defines {name}, which the generator does not set"
                     ));

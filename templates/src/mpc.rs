@@ -1,0 +1,650 @@
+//! Real-time-iteration MPC: one Gauss-Newton SQP step per sample on the
+//! multiple-shooting NLP, condensed into a dense box QP in the N·NU inputs.
+//! The algorithm and its notation are those of docs/mpc.md.
+
+use crate::math::sqrt;
+use crate::qp::{BoxQp, QpStatus};
+use crate::rk4::{discrete_dynamics, discrete_linearization};
+use crate::{Real, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, U_MAX, U_MIN};
+
+/// What happened in a solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    /// The QP was solved to optimality.
+    Solved,
+    /// The QP hit `MAX_QP_ITERATIONS`; the best bounded iterate was applied.
+    IterationCap,
+    /// The condensed Hessian was not numerically positive definite; a multiple of I was added.
+    HessianRegularised,
+    /// Non-finite x₀ or reference: the previous plan is kept, u0 is its first input.
+    InvalidInput,
+    /// A non-finite value appeared in the linearisation or the step: the previous plan is kept.
+    NumericalFailure,
+}
+
+/// Result of [`Mpc::feedback`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Solution {
+    /// The input to apply now: finite and within [U_MIN, U_MAX] whatever the status.
+    pub u0: [Real; NU],
+    pub status: Status,
+    /// Active-set iterations of the QP.
+    pub qp_iterations: usize,
+    /// ½ Σ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ ūₖᵀ R ūₖ of the plan after this step.
+    pub cost: Real,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    /// No QP data for the current guess.
+    Stale,
+    /// prepare() succeeded; `regularised` if H needed δI.
+    Prepared { regularised: bool },
+    /// prepare() rejected the reference.
+    InvalidReference,
+    /// prepare() met non-finite numbers.
+    Failed,
+}
+
+/// The MPC solver with all its workspaces (no allocation, sizes fixed at compile time).
+#[derive(Clone, Debug)]
+pub struct Mpc {
+    /// Guess x̄₀..x̄_N (a multiple-shooting iterate).
+    xs: [[Real; NX]; N + 1],
+    /// Guess ū₀..ū_{N−1}.
+    us: [[Real; NU]; N],
+    reference: [[Real; NX]; N + 1],
+    has_reference: bool,
+    /// Aₖ = ∂F/∂x, Bₖ = ∂F/∂u at the guess; cₖ = F(x̄ₖ, ūₖ) − x̄ₖ₊₁.
+    a: [[[Real; NX]; NX]; N],
+    b: [[[Real; NU]; NX]; N],
+    c: [[Real; NX]; N],
+    /// Condensed Hessian (full symmetric storage).
+    h: [[Real; NV]; NV],
+    g: [Real; NV],
+    lo: [Real; NV],
+    hi: [Real; NV],
+    v: [Real; NV],
+    /// Free response / state step workspace.
+    z: [[Real; NX]; N + 1],
+    qp: BoxQp<NV>,
+    phase: Phase,
+}
+
+impl Default for Mpc {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[inline]
+fn all_finite(values: &[Real]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+#[inline]
+fn clamp_input(u: &[Real; NU]) -> [Real; NU] {
+    let mut out = [0.0; NU];
+    for i in 0..NU {
+        // A NaN becomes the bound nearest zero's side: max(NaN, lo) = lo.
+        out[i] = u[i].max(U_MIN[i]).min(U_MAX[i]);
+    }
+    out
+}
+
+impl Mpc {
+    /// A solver whose guess is all zeros.
+    pub const fn new() -> Self {
+        Self {
+            xs: [[0.0; NX]; N + 1],
+            us: [[0.0; NU]; N],
+            reference: [[0.0; NX]; N + 1],
+            has_reference: false,
+            a: [[[0.0; NX]; NX]; N],
+            b: [[[0.0; NU]; NX]; N],
+            c: [[0.0; NX]; N],
+            h: [[0.0; NV]; NV],
+            g: [0.0; NV],
+            lo: [0.0; NV],
+            hi: [0.0; NV],
+            v: [0.0; NV],
+            z: [[0.0; NX]; N + 1],
+            qp: BoxQp::new(),
+            phase: Phase::Stale,
+        }
+    }
+
+    /// Guess x̄ₖ = x0 for all k and ūₖ = u (clamped into the bounds); ignored if not finite.
+    pub fn initialize(&mut self, x0: &[Real; NX], u: &[Real; NU]) {
+        if !all_finite(x0) || !all_finite(u) {
+            return;
+        }
+        let u = clamp_input(u);
+        self.xs = [*x0; N + 1];
+        self.us = [u; N];
+        self.phase = Phase::Stale;
+    }
+
+    /// Planned inputs ū₀..ū_{N−1} of the current guess.
+    pub fn planned_inputs(&self) -> &[[Real; NU]; N] {
+        &self.us
+    }
+
+    /// Predicted states x̄₀..x̄_N of the current guess.
+    pub fn predicted_states(&self) -> &[[Real; NX]; N + 1] {
+        &self.xs
+    }
+
+    /// Linearise along the guess, condense and factorise: all the work that
+    /// does not need the measurement.
+    pub fn prepare(&mut self, reference: &[[Real; NX]; N + 1]) -> Status {
+        if !reference.iter().all(|r| all_finite(r)) {
+            self.phase = Phase::InvalidReference;
+            return Status::InvalidInput;
+        }
+        self.reference = *reference;
+        self.has_reference = true;
+        if !self.linearize() {
+            self.phase = Phase::Failed;
+            return Status::NumericalFailure;
+        }
+        self.condense();
+        // lo = u_min − ū ≤ v ≤ u_max − ū = hi
+        for k in 0..N {
+            for i in 0..NU {
+                self.lo[k * NU + i] = U_MIN[i] - self.us[k][i];
+                self.hi[k * NU + i] = U_MAX[i] - self.us[k][i];
+            }
+        }
+        match self.factorize() {
+            Some(regularised) => {
+                self.phase = Phase::Prepared { regularised };
+                if regularised {
+                    Status::HessianRegularised
+                } else {
+                    Status::Solved
+                }
+            }
+            None => {
+                self.phase = Phase::Failed;
+                Status::NumericalFailure
+            }
+        }
+    }
+
+    /// (Fₖ, Aₖ, Bₖ) at the guess and the defects cₖ = Fₖ − x̄ₖ₊₁; false if anything is not finite.
+    fn linearize(&mut self) -> bool {
+        let mut finite = true;
+        for k in 0..N {
+            let (next, a, b) = discrete_linearization(&self.xs[k], &self.us[k]);
+            for i in 0..NX {
+                self.c[k][i] = next[i] - self.xs[k + 1][i];
+            }
+            self.a[k] = a;
+            self.b[k] = b;
+            finite &= all_finite(&self.c[k]) && a.iter().all(|r| all_finite(r)) && b.iter().all(|r| all_finite(r));
+        }
+        finite
+    }
+
+    /// Condensed Hessian by the backward recursion (the prediction matrix is never formed):
+    /// P_N = Q_N, Mᵢ = Bᵢᵀ Pᵢ₊₁, H_ii = Mᵢ Bᵢ + R + δI, H_ij = Mᵢ Aᵢ Aᵢ₋₁ ⋯ A_{j+1} B_j (j < i),
+    /// Pᵢ = Q + Aᵢᵀ Pᵢ₊₁ Aᵢ.
+    fn condense(&mut self) {
+        let mut p = [[0.0; NX]; NX];
+        for r in 0..NX {
+            p[r][r] = Q_TERMINAL[r];
+        }
+        for i in (0..N).rev() {
+            let bi = &self.b[i];
+            // M = Bᵢᵀ P
+            let mut m = [[0.0; NX]; NU];
+            for k in 0..NX {
+                let prow = &p[k];
+                for r in 0..NU {
+                    let bkr = bi[k][r];
+                    for c in 0..NX {
+                        m[r][c] += bkr * prow[c];
+                    }
+                }
+            }
+            // H_ii = M Bᵢ + R + δI
+            for r in 0..NU {
+                for c in 0..NU {
+                    let mut s = 0.0;
+                    for k in 0..NX {
+                        s += m[r][k] * bi[k][c];
+                    }
+                    if r == c {
+                        s += R[r] + REGULARISATION;
+                    }
+                    self.h[i * NU + r][i * NU + c] = s;
+                }
+            }
+            // E = M Aᵢ ⋯ A_{j+1}, H_ij = E B_j and H_ji = H_ijᵀ
+            let mut e = m;
+            for j in (0..i).rev() {
+                let a = &self.a[j + 1];
+                let mut next = [[0.0; NX]; NU];
+                for r in 0..NU {
+                    for k in 0..NX {
+                        let erk = e[r][k];
+                        let arow = &a[k];
+                        for c in 0..NX {
+                            next[r][c] += erk * arow[c];
+                        }
+                    }
+                }
+                e = next;
+                let bj = &self.b[j];
+                for r in 0..NU {
+                    for c in 0..NU {
+                        let mut s = 0.0;
+                        for k in 0..NX {
+                            s += e[r][k] * bj[k][c];
+                        }
+                        self.h[i * NU + r][j * NU + c] = s;
+                        self.h[j * NU + c][i * NU + r] = s;
+                    }
+                }
+            }
+            if i > 0 {
+                // Pᵢ = Q + Aᵢᵀ (P Aᵢ)
+                let a = &self.a[i];
+                let mut t = [[0.0; NX]; NX];
+                for r in 0..NX {
+                    for k in 0..NX {
+                        let prk = p[r][k];
+                        let arow = &a[k];
+                        for c in 0..NX {
+                            t[r][c] += prk * arow[c];
+                        }
+                    }
+                }
+                let mut next = [[0.0; NX]; NX];
+                for k in 0..NX {
+                    let trow = &t[k];
+                    for r in 0..NX {
+                        let akr = a[k][r];
+                        for c in 0..NX {
+                            next[r][c] += akr * trow[c];
+                        }
+                    }
+                }
+                for r in 0..NX {
+                    next[r][r] += Q[r];
+                }
+                p = next;
+            }
+        }
+    }
+
+    /// Factorise H_FF for the warm-start working set; if a pivot fails, add
+    /// δI with growing δ. Some(regularised) on success, None if hopeless.
+    fn factorize(&mut self) -> Option<bool> {
+        if self.qp.factorize(&self.h).is_ok() {
+            return Some(false);
+        }
+        let mut scale: Real = 1.0;
+        for i in 0..NV {
+            if !self.h[i][i].is_finite() {
+                return None;
+            }
+            scale = scale.max(self.h[i][i].abs());
+        }
+        let mut delta = sqrt(Real::EPSILON) * scale;
+        for _ in 0..8 {
+            for i in 0..NV {
+                self.h[i][i] += delta;
+            }
+            if self.qp.factorize(&self.h).is_ok() {
+                return Some(true);
+            }
+            delta *= 100.0;
+        }
+        None
+    }
+
+    /// The previous plan: its first input, nothing changed.
+    fn keep_plan(&mut self, status: Status) -> Solution {
+        Solution { u0: clamp_input(&self.us[0]), status, qp_iterations: 0, cost: self.cost() }
+    }
+
+    /// ½ Σₖ₌₀ᴺ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ ūₖᵀ R ūₖ of the guess (0 without a reference).
+    fn cost(&self) -> Real {
+        if !self.has_reference {
+            return 0.0;
+        }
+        let mut cost = 0.0;
+        for k in 0..=N {
+            let weights = if k < N { &Q } else { &Q_TERMINAL };
+            for i in 0..NX {
+                let e = self.xs[k][i] - self.reference[k][i];
+                cost += 0.5 * weights[i] * e * e;
+            }
+        }
+        for k in 0..N {
+            for i in 0..NU {
+                cost += 0.5 * R[i] * self.us[k][i] * self.us[k][i];
+            }
+        }
+        if cost.is_finite() {
+            cost
+        } else {
+            Real::MAX
+        }
+    }
+
+    /// Finish the step with the measurement x₀: gradient, QP, guess update.
+    pub fn feedback(&mut self, x0: &[Real; NX]) -> Solution {
+        if !all_finite(x0) {
+            return self.keep_plan(Status::InvalidInput);
+        }
+        let regularised = match self.phase {
+            Phase::Prepared { regularised } => regularised,
+            Phase::InvalidReference => return self.keep_plan(Status::InvalidInput),
+            Phase::Failed => {
+                // Restart from the measurement, holding the planned input.
+                let u = self.us[0];
+                self.initialize(x0, &u);
+                return self.keep_plan(Status::NumericalFailure);
+            }
+            Phase::Stale => {
+                if !self.has_reference {
+                    return self.keep_plan(Status::InvalidInput);
+                }
+                let reference = self.reference;
+                match self.prepare(&reference) {
+                    Status::Solved => false,
+                    Status::HessianRegularised => true,
+                    other => return self.feedback_after_failed_prepare(x0, other),
+                }
+            }
+        };
+
+        // Free response: z₀ = x₀ − x̄₀, zₖ₊₁ = Aₖ zₖ + cₖ
+        for i in 0..NX {
+            self.z[0][i] = x0[i] - self.xs[0][i];
+        }
+        for k in 0..N {
+            let (a, zk) = (&self.a[k], self.z[k]);
+            for i in 0..NX {
+                let mut s = self.c[k][i];
+                for j in 0..NX {
+                    s += a[i][j] * zk[j];
+                }
+                self.z[k + 1][i] = s;
+            }
+        }
+        // Adjoint: p_N = Q_N e_N, g_j = B_jᵀ p_{j+1} + R ū_j, p_j = Q e_j + A_jᵀ p_{j+1}
+        let mut p = [0.0; NX];
+        for i in 0..NX {
+            p[i] = Q_TERMINAL[i] * (self.xs[N][i] + self.z[N][i] - self.reference[N][i]);
+        }
+        for j in (0..N).rev() {
+            let b = &self.b[j];
+            for r in 0..NU {
+                let mut s = R[r] * self.us[j][r];
+                for k in 0..NX {
+                    s += b[k][r] * p[k];
+                }
+                self.g[j * NU + r] = s;
+            }
+            if j > 0 {
+                let a = &self.a[j];
+                let mut next = [0.0; NX];
+                for k in 0..NX {
+                    let pk = p[k];
+                    for i in 0..NX {
+                        next[i] += a[k][i] * pk;
+                    }
+                }
+                for i in 0..NX {
+                    next[i] += Q[i] * (self.xs[j][i] + self.z[j][i] - self.reference[j][i]);
+                }
+                p = next;
+            }
+        }
+
+        // Box QP from v = 0 (ū is feasible, so 0 is in the box) with the warm-start working set.
+        self.v = [0.0; NV];
+        let mut result = self.qp.solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS);
+        let mut regularised = regularised;
+        if result.status == QpStatus::NotPositiveDefinite {
+            // An append found H_FF not numerically positive definite: regularise and solve again.
+            match self.factorize_regularised() {
+                true => {
+                    regularised = true;
+                    self.v = [0.0; NV];
+                    let again = self.qp.solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS);
+                    result.iterations += again.iterations;
+                    result.status = again.status;
+                }
+                false => return self.keep_plan(Status::NumericalFailure),
+            }
+        }
+        let status = match result.status {
+            QpStatus::Optimal if regularised => Status::HessianRegularised,
+            QpStatus::Optimal => Status::Solved,
+            QpStatus::IterationCap => Status::IterationCap,
+            QpStatus::NotPositiveDefinite => Status::HessianRegularised,
+        };
+
+        // Update the guess: δx₀ = z₀, δxₖ₊₁ = Aₖ δxₖ + Bₖ vₖ + cₖ; x̄ += δx, ū += v.
+        let (xs_before, us_before) = (self.xs, self.us);
+        for i in 0..NX {
+            self.xs[0][i] = x0[i];
+        }
+        let mut dx = self.z[0];
+        for k in 0..N {
+            let (a, b) = (&self.a[k], &self.b[k]);
+            let mut next = self.c[k];
+            for i in 0..NX {
+                for j in 0..NX {
+                    next[i] += a[i][j] * dx[j];
+                }
+                for j in 0..NU {
+                    next[i] += b[i][j] * self.v[k * NU + j];
+                }
+            }
+            let mut u = [0.0; NU];
+            for j in 0..NU {
+                u[j] = self.us[k][j] + self.v[k * NU + j];
+            }
+            self.us[k] = clamp_input(&u);
+            for i in 0..NX {
+                self.xs[k + 1][i] += next[i];
+            }
+            dx = next;
+        }
+        self.phase = Phase::Stale;
+        if !self.xs.iter().all(|x| all_finite(x)) || !self.us.iter().all(|u| all_finite(u)) {
+            self.xs = xs_before;
+            self.us = us_before;
+            return self.keep_plan(Status::NumericalFailure);
+        }
+        Solution { u0: self.us[0], status, qp_iterations: result.iterations, cost: self.cost() }
+    }
+
+    fn feedback_after_failed_prepare(&mut self, x0: &[Real; NX], status: Status) -> Solution {
+        if status == Status::NumericalFailure {
+            let u = self.us[0];
+            self.initialize(x0, &u);
+        }
+        self.keep_plan(status)
+    }
+
+    /// Add δI (growing) until the current working set factorises; false if it never does.
+    fn factorize_regularised(&mut self) -> bool {
+        let mut scale: Real = 1.0;
+        for i in 0..NV {
+            scale = scale.max(self.h[i][i].abs());
+        }
+        let mut delta = sqrt(Real::EPSILON) * scale;
+        for _ in 0..8 {
+            for i in 0..NV {
+                self.h[i][i] += delta;
+            }
+            if self.qp.factorize(&self.h).is_ok() {
+                return true;
+            }
+            delta *= 100.0;
+        }
+        false
+    }
+
+    /// prepare + feedback.
+    pub fn solve(&mut self, x0: &[Real; NX], reference: &[[Real; NX]; N + 1]) -> Solution {
+        match self.prepare(reference) {
+            Status::InvalidInput => self.keep_plan(Status::InvalidInput),
+            _ => self.feedback(x0),
+        }
+    }
+
+    /// Move the guess one sample ahead: x̄ₖ ← x̄ₖ₊₁, ūₖ ← ūₖ₊₁, the last input
+    /// repeated and x̄_N ← F(x̄_{N−1}, ū_{N−1}); the stored reference and the
+    /// QP working set shift alike.
+    pub fn shift(&mut self) {
+        for k in 0..N {
+            self.xs[k] = self.xs[k + 1];
+            self.reference[k] = self.reference[k + 1];
+        }
+        for k in 0..N - 1 {
+            self.us[k] = self.us[k + 1];
+        }
+        let last = discrete_dynamics(&self.xs[N - 1], &self.us[N - 1]);
+        self.xs[N] = if all_finite(&last) { last } else { self.xs[N - 1] };
+        self.qp.shift_working_set(NU);
+        self.phase = Phase::Stale;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Dense reference: Γ (the prediction matrix, formed here only) and
+    /// H = Γᵀ Q̄ Γ + R̄, to check the backward-recursion condensing.
+    fn dense_hessian(mpc: &Mpc) -> [[Real; NV]; NV] {
+        // Γ[k][j] = ∂δx_k/∂v_j, k = 1..N, as NX rows per k.
+        let mut gamma = [[[0.0; NV]; NX]; N + 1];
+        for k in 0..N {
+            let (a, b) = (&mpc.a[k], &mpc.b[k]);
+            for i in 0..NX {
+                for col in 0..NV {
+                    let mut s = 0.0;
+                    for j in 0..NX {
+                        s += a[i][j] * gamma[k][j][col];
+                    }
+                    if col / NU == k {
+                        s += b[i][col % NU];
+                    }
+                    gamma[k + 1][i][col] = s;
+                }
+            }
+        }
+        let mut h = [[0.0; NV]; NV];
+        for r in 0..NV {
+            for c in 0..NV {
+                let mut s = 0.0;
+                for k in 1..=N {
+                    let w = if k < N { &Q } else { &Q_TERMINAL };
+                    for i in 0..NX {
+                        s += gamma[k][i][r] * w[i] * gamma[k][i][c];
+                    }
+                }
+                if r == c {
+                    s += R[r % NU] + REGULARISATION;
+                }
+                h[r][c] = s;
+            }
+        }
+        h
+    }
+
+    fn reference(position: Real) -> [[Real; NX]; N + 1] {
+        [[position, 0.0]; N + 1]
+    }
+
+    #[test]
+    fn condensed_hessian_equals_dense_prediction_form() {
+        let mut mpc = Mpc::new();
+        mpc.initialize(&[0.3, -0.2], &[0.1]);
+        assert_eq!(mpc.prepare(&reference(0.5)), Status::Solved);
+        let dense = dense_hessian(&mpc);
+        for r in 0..NV {
+            for c in 0..NV {
+                assert!((mpc.h[r][c] - dense[r][c]).abs() < 1e-12, "H[{r}][{c}] = {} vs {}", mpc.h[r][c], dense[r][c]);
+            }
+        }
+    }
+
+    #[test]
+    fn rti_on_a_linear_model_is_the_exact_mpc_solution() {
+        // For a linear model one Gauss-Newton step is exact: a second step at the
+        // same x₀ changes nothing.
+        let mut mpc = Mpc::new();
+        let x0 = [0.0, 0.0];
+        let first = mpc.solve(&x0, &reference(0.5));
+        assert_eq!(first.status, Status::Solved);
+        let plan = *mpc.planned_inputs();
+        let second = mpc.solve(&x0, &reference(0.5));
+        assert_eq!(second.status, Status::Solved);
+        // Up to the proximal term ½ δ ‖v‖² (δ = REGULARISATION), which shrinks each step by ~δ/λ(H).
+        for k in 0..N {
+            let d = (plan[k][0] - mpc.planned_inputs()[k][0]).abs();
+            assert!(d < 1e-7, "stage {k}: second step moved the plan by {d:e}");
+        }
+        assert!((first.cost - second.cost).abs() < 1e-12);
+        // The plan's predicted states are the model's trajectory (no defects left).
+        let xs = mpc.predicted_states();
+        for k in 0..N {
+            let next = discrete_dynamics(&xs[k], &mpc.planned_inputs()[k]);
+            assert!((next[0] - xs[k + 1][0]).abs() < 1e-12 && (next[1] - xs[k + 1][1]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn closed_loop_reaches_the_setpoint_within_bounds() {
+        let mut mpc = Mpc::new();
+        let mut x = [0.0, 0.0];
+        for _ in 0..200 {
+            let s = mpc.solve(&x, &reference(0.5));
+            assert!(matches!(s.status, Status::Solved | Status::IterationCap));
+            assert!(s.u0[0] >= U_MIN[0] && s.u0[0] <= U_MAX[0]);
+            x = discrete_dynamics(&x, &s.u0);
+            mpc.shift();
+        }
+        // At rest x₀ = B u / K; the optimal constant u balances ½ q (B u / K − 0.5)² against
+        // ½ r u²: u = q (B/K) 0.5 / (q B²/K² + r) = 0.25 / 0.35, so x₀ = u / 2 ≈ 0.357 (the
+        // finite horizon and terminal weight move it slightly).
+        assert!((x[0] - 0.25 / 0.35 / 2.0).abs() < 0.01, "x = {x:?}");
+        assert!(x[1].abs() < 1e-3);
+    }
+
+    #[test]
+    fn saturating_reference_keeps_inputs_on_the_bound() {
+        // A far setpoint saturates u at its upper bound.
+        let mut mpc = Mpc::new();
+        let s = mpc.solve(&[0.0, 0.0], &reference(100.0));
+        assert_eq!(s.u0[0], U_MAX[0]);
+        assert!(mpc.planned_inputs().iter().all(|u| u[0] <= U_MAX[0] && u[0] >= U_MIN[0]));
+    }
+
+    #[test]
+    fn invalid_input_keeps_the_previous_plan() {
+        let mut mpc = Mpc::new();
+        let good = mpc.solve(&[0.0, 0.0], &reference(0.5));
+        let plan = *mpc.planned_inputs();
+        let s = mpc.feedback(&[Real::NAN, 0.0]);
+        assert_eq!(s.status, Status::InvalidInput);
+        assert_eq!(s.u0, plan[0]);
+        assert_eq!(s.u0, good.u0);
+        let mut bad_ref = reference(0.5);
+        bad_ref[7][1] = Real::INFINITY;
+        let s = mpc.solve(&[0.0, 0.0], &bad_ref);
+        assert_eq!(s.status, Status::InvalidInput);
+        assert_eq!(*mpc.planned_inputs(), plan);
+        assert!(s.cost.is_finite());
+    }
+}

@@ -1,0 +1,515 @@
+//! Box-constrained strictly convex QP by a primal active-set method with
+//! Cholesky updates:
+//!
+//!   min ½ vᵀ H v + gᵀ v   s.t.  lo ≤ v ≤ hi,   H = Hᵀ ≻ 0,  v ∈ ℝⁿ.
+//!
+//! The working set W holds the variables fixed at a bound, F the free ones.
+//! L is the Cholesky factor of H_FF (rows and columns in the order of `free`).
+//! Each iteration solves the equality-constrained subproblem on F,
+//!
+//!   v_F* = −H_FF⁻¹ (g_F + H_FW v_W),
+//!
+//! moves towards it as far as the box allows, and either fixes the blocking
+//! variable (a row/column deletion of L by a rank-one update, O(n²)) or, at
+//! the subproblem's minimiser, frees the variable with the most negative
+//! multiplier (a row/column append, O(n²)). Every iterate is inside the box and
+//! the objective never increases, so stopping at the iteration cap returns the
+//! best bounded iterate found.
+
+use crate::math::sqrt;
+use crate::Real;
+
+/// Where a variable is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bound {
+    Free,
+    Lower,
+    Upper,
+}
+
+/// How a solve ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum QpStatus {
+    /// KKT conditions hold: the exact minimiser (up to rounding).
+    Optimal,
+    /// The iteration cap was reached; the iterate is feasible and no worse than the start.
+    IterationCap,
+    /// A pivot of the reduced Hessian was not positive: H is not numerically positive definite.
+    NotPositiveDefinite,
+}
+
+/// Result of [`BoxQp::solve`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QpResult {
+    pub status: QpStatus,
+    pub iterations: usize,
+}
+
+/// Workspace of the active-set solver for `NV` variables (no allocation).
+#[derive(Clone, Debug)]
+pub struct BoxQp<const NV: usize> {
+    /// Cholesky factor of H_FF, lower triangle, `nf × nf` used.
+    l: [[Real; NV]; NV],
+    /// Free variables in factor order.
+    free: [usize; NV],
+    nf: usize,
+    /// Working set: the bound each variable sits at (or Free).
+    state: [Bound; NV],
+    rhs: [Real; NV],
+    target: [Real; NV],
+}
+
+impl<const NV: usize> Default for BoxQp<NV> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Relative pivot tolerance of the factorisation.
+const PIVOT_TOLERANCE: Real = 1e3 * Real::EPSILON;
+
+impl<const NV: usize> BoxQp<NV> {
+    /// All variables free, nothing factorised.
+    pub const fn new() -> Self {
+        Self {
+            l: [[0.0; NV]; NV],
+            free: [0; NV],
+            nf: 0,
+            state: [Bound::Free; NV],
+            rhs: [0.0; NV],
+            target: [0.0; NV],
+        }
+    }
+
+    /// The working set (read access).
+    #[allow(dead_code)] // used by tests; the MPC keeps its working set inside
+    pub fn working_set(&self) -> &[Bound; NV] {
+        &self.state
+    }
+
+    /// Replace the working set (e.g. a warm start); call [`Self::factorize`] afterwards.
+    #[allow(dead_code)] // used by tests; the MPC keeps its working set inside
+    pub fn set_working_set(&mut self, state: &[Bound; NV]) {
+        self.state = *state;
+    }
+
+    /// Shift the working set by `block` variables (one MPC stage): variable i
+    /// takes the state of i + block; the last block repeats.
+    pub fn shift_working_set(&mut self, block: usize) {
+        if block == 0 || block >= NV {
+            return;
+        }
+        for i in 0..NV - block {
+            self.state[i] = self.state[i + block];
+        }
+    }
+
+    /// Cholesky factorisation of H_FF for the current working set:
+    /// L Lᵀ = H_FF, row by row, L_ij = (H_ij − Σ_{k<j} L_ik L_jk) / L_jj.
+    /// Fails if a pivot is ≤ tolerance · H_ii (H not numerically positive definite).
+    pub fn factorize(&mut self, h: &[[Real; NV]; NV]) -> Result<(), QpStatus> {
+        self.nf = 0;
+        for i in 0..NV {
+            if self.state[i] == Bound::Free {
+                self.free[self.nf] = i;
+                self.nf += 1;
+            }
+        }
+        let nf = self.nf;
+        for i in 0..nf {
+            let hi = &h[self.free[i]];
+            for j in 0..=i {
+                let (ri, rj) = (&self.l[i], &self.l[j]);
+                let mut s = hi[self.free[j]];
+                for k in 0..j {
+                    s -= ri[k] * rj[k];
+                }
+                if j < i {
+                    self.l[i][j] = s / self.l[j][j];
+                } else {
+                    if !(s > PIVOT_TOLERANCE * hi[self.free[i]].abs()) {
+                        return Err(QpStatus::NotPositiveDefinite);
+                    }
+                    self.l[i][i] = sqrt(s);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Solve L Lᵀ y = b in place on `rhs[..nf]` (forward then backward substitution).
+    fn solve_factored(&mut self) {
+        let nf = self.nf;
+        // L y = b
+        for i in 0..nf {
+            let row = &self.l[i];
+            let mut s = self.rhs[i];
+            for k in 0..i {
+                s -= row[k] * self.rhs[k];
+            }
+            self.rhs[i] = s / row[i];
+        }
+        // Lᵀ x = y, by columns of Lᵀ = rows of L
+        for i in (0..nf).rev() {
+            let xi = self.rhs[i] / self.l[i][i];
+            self.rhs[i] = xi;
+            let row = &self.l[i];
+            for k in 0..i {
+                self.rhs[k] -= row[k] * xi;
+            }
+        }
+    }
+
+    /// Append variable `var` as the last free variable: with c = H_{F,var},
+    /// L l = c, d = √(H_var,var − lᵀl).
+    fn append(&mut self, h: &[[Real; NV]; NV], var: usize) -> Result<(), QpStatus> {
+        let nf = self.nf;
+        if nf >= NV {
+            return Err(QpStatus::NotPositiveDefinite);
+        }
+        let hv = &h[var];
+        // l = L⁻¹ c by forward substitution, built in `target`.
+        for i in 0..nf {
+            let row = &self.l[i];
+            let mut s = hv[self.free[i]];
+            for k in 0..i {
+                s -= row[k] * self.target[k];
+            }
+            self.target[i] = s / row[i];
+        }
+        let mut d = hv[var];
+        for k in 0..nf {
+            d -= self.target[k] * self.target[k];
+        }
+        if !(d > PIVOT_TOLERANCE * hv[var].abs()) {
+            return Err(QpStatus::NotPositiveDefinite);
+        }
+        self.l[nf][..nf].copy_from_slice(&self.target[..nf]);
+        self.l[nf][nf] = sqrt(d);
+        self.free[nf] = var;
+        self.nf += 1;
+        Ok(())
+    }
+
+    /// Remove free position `p` from the factor. With L = [L11 0 0; l21ᵀ l22 0; L31 l32 L33],
+    /// the factor of H_FF without p is [L11 0; L31 L33'] with L33' L33'ᵀ = L33 L33ᵀ + l32 l32ᵀ
+    /// (a rank-one update by rotations).
+    fn remove(&mut self, p: usize) {
+        let nf = self.nf;
+        // x = l32 (column p below the diagonal), rows shifted up over row p.
+        for i in p + 1..nf {
+            self.target[i - 1] = self.l[i][p];
+            for k in 0..p {
+                self.l[i - 1][k] = self.l[i][k];
+            }
+            for k in p + 1..=i {
+                self.l[i - 1][k - 1] = self.l[i][k];
+            }
+        }
+        for i in p..nf - 1 {
+            self.free[i] = self.free[i + 1];
+        }
+        self.nf -= 1;
+        let nf = self.nf;
+        // Rank-one update of the trailing block rows/cols p..nf by x = target[p..nf].
+        for k in p..nf {
+            let lkk = self.l[k][k];
+            let xk = self.target[k];
+            let r = sqrt(lkk * lkk + xk * xk);
+            let (c, s) = (r / lkk, xk / lkk);
+            self.l[k][k] = r;
+            for i in k + 1..nf {
+                let lik = (self.l[i][k] + s * self.target[i]) / c;
+                self.target[i] = c * self.target[i] - s * lik;
+                self.l[i][k] = lik;
+            }
+        }
+    }
+
+    /// Solve from `v` (clamped into the box) with the current working set;
+    /// [`Self::factorize`] must have been called for it with the same `h`.
+    /// `v` holds the solution (or the best bounded iterate) on return.
+    pub fn solve(
+        &mut self,
+        h: &[[Real; NV]; NV],
+        g: &[Real; NV],
+        lo: &[Real; NV],
+        hi: &[Real; NV],
+        v: &mut [Real; NV],
+        max_iterations: usize,
+    ) -> QpResult {
+        for i in 0..NV {
+            v[i] = match self.state[i] {
+                Bound::Lower => lo[i],
+                Bound::Upper => hi[i],
+                Bound::Free => v[i].max(lo[i]).min(hi[i]),
+            };
+        }
+        let scale = g.iter().fold(1.0 as Real, |m, x| m.max(x.abs()));
+        let tolerance = 1e4 * Real::EPSILON * scale;
+        let mut iterations = 0;
+        while iterations < max_iterations {
+            iterations += 1;
+            // rhs = −(g_F + H_FW v_W)
+            for i in 0..self.nf {
+                let var = self.free[i];
+                let row = &h[var];
+                let mut s = g[var];
+                for j in 0..NV {
+                    if self.state[j] != Bound::Free {
+                        s += row[j] * v[j];
+                    }
+                }
+                self.rhs[i] = -s;
+            }
+            self.solve_factored();
+            // Largest α ≤ 1 keeping v_F + α (v_F* − v_F) in the box.
+            let mut alpha: Real = 1.0;
+            let mut blocking = None;
+            for i in 0..self.nf {
+                let var = self.free[i];
+                let d = self.rhs[i] - v[var];
+                let (limit, bound) = if d < 0.0 { (lo[var], Bound::Lower) } else { (hi[var], Bound::Upper) };
+                if d != 0.0 {
+                    let a = (limit - v[var]) / d;
+                    if a < alpha {
+                        alpha = a.max(0.0);
+                        blocking = Some((i, bound));
+                    }
+                }
+            }
+            for i in 0..self.nf {
+                let var = self.free[i];
+                v[var] += alpha * (self.rhs[i] - v[var]);
+            }
+            if let Some((p, bound)) = blocking {
+                let var = self.free[p];
+                v[var] = if bound == Bound::Lower { lo[var] } else { hi[var] };
+                self.state[var] = bound;
+                self.remove(p);
+                continue;
+            }
+            // At the subproblem's minimiser: multipliers of the working set.
+            let mut worst = -tolerance;
+            let mut release = None;
+            for j in 0..NV {
+                let sign = match self.state[j] {
+                    Bound::Free => continue,
+                    Bound::Lower => 1.0,
+                    Bound::Upper => -1.0,
+                };
+                let row = &h[j];
+                let mut grad = g[j];
+                for k in 0..NV {
+                    grad += row[k] * v[k];
+                }
+                let mu = sign * grad;
+                if mu < worst {
+                    worst = mu;
+                    release = Some(j);
+                }
+            }
+            match release {
+                None => return QpResult { status: QpStatus::Optimal, iterations },
+                Some(j) => {
+                    if self.append(h, j).is_err() {
+                        return QpResult { status: QpStatus::NotPositiveDefinite, iterations };
+                    }
+                    self.state[j] = Bound::Free;
+                }
+            }
+        }
+        QpResult { status: QpStatus::IterationCap, iterations }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// ½ vᵀHv + gᵀv
+    fn objective<const NV: usize>(h: &[[Real; NV]; NV], g: &[Real; NV], v: &[Real; NV]) -> Real {
+        let mut f = 0.0;
+        for i in 0..NV {
+            f += g[i] * v[i];
+            for j in 0..NV {
+                f += 0.5 * v[i] * h[i][j] * v[j];
+            }
+        }
+        f
+    }
+
+    /// KKT of the box QP: gradient zero on free variables, sign-correct at bounds.
+    fn assert_kkt<const NV: usize>(h: &[[Real; NV]; NV], g: &[Real; NV], lo: &[Real; NV], hi: &[Real; NV], v: &[Real; NV]) {
+        for i in 0..NV {
+            assert!(v[i] >= lo[i] && v[i] <= hi[i], "v[{i}] = {} outside [{}, {}]", v[i], lo[i], hi[i]);
+            let mut grad = g[i];
+            for j in 0..NV {
+                grad += h[i][j] * v[j];
+            }
+            if v[i] > lo[i] && v[i] < hi[i] {
+                assert!(grad.abs() < 1e-9, "free v[{i}] has gradient {grad}");
+            } else if v[i] == lo[i] {
+                assert!(grad > -1e-9, "v[{i}] at lower bound with gradient {grad}");
+            } else {
+                assert!(grad < 1e-9, "v[{i}] at upper bound with gradient {grad}");
+            }
+        }
+    }
+
+    #[test]
+    fn unconstrained_two_by_two_by_hand() {
+        // H = [[2, 1], [1, 2]], g = [−1, −1]: v* = H⁻¹[1, 1] = [1/3, 1/3].
+        let h = [[2.0, 1.0], [1.0, 2.0]];
+        let g = [-1.0, -1.0];
+        let (lo, hi) = ([-10.0; 2], [10.0; 2]);
+        let mut qp = BoxQp::<2>::new();
+        qp.factorize(&h).unwrap();
+        let mut v = [0.0; 2];
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10);
+        assert_eq!(r.status, QpStatus::Optimal);
+        assert!((v[0] - 1.0 / 3.0).abs() < 1e-15 && (v[1] - 1.0 / 3.0).abs() < 1e-15);
+        assert_eq!(r.iterations, 1);
+    }
+
+    #[test]
+    fn active_bound_by_hand() {
+        // Same H, g = [−4, 0]: unconstrained v* = [8/3, −4/3]; with v0 ≤ 1 the
+        // optimum is v0 = 1, v1 = −1/2 (∂/∂v1: v0 + 2 v1 = 0), multiplier of v0: 2 + v1 − 4 = −2.5 < 0 → upper bound holds.
+        let h = [[2.0, 1.0], [1.0, 2.0]];
+        let g = [-4.0, 0.0];
+        let (lo, hi) = ([-10.0, -10.0], [1.0, 10.0]);
+        let mut qp = BoxQp::<2>::new();
+        qp.factorize(&h).unwrap();
+        let mut v = [0.0; 2];
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10);
+        assert_eq!(r.status, QpStatus::Optimal);
+        assert_eq!(v[0], 1.0);
+        assert!((v[1] + 0.5).abs() < 1e-15);
+        assert_eq!(qp.working_set(), &[Bound::Upper, Bound::Free]);
+        // Warm start from the optimal working set: one iteration.
+        qp.factorize(&h).unwrap();
+        let mut v = [0.0; 2];
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10);
+        assert_eq!((r.status, r.iterations), (QpStatus::Optimal, 1));
+    }
+
+    #[test]
+    fn releases_a_wrongly_fixed_variable() {
+        let h = [[2.0, 1.0], [1.0, 2.0]];
+        let g = [-1.0, -1.0];
+        let (lo, hi) = ([-10.0; 2], [10.0; 2]);
+        let mut qp = BoxQp::<2>::new();
+        qp.set_working_set(&[Bound::Lower, Bound::Upper]);
+        qp.factorize(&h).unwrap();
+        let mut v = [0.0; 2];
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10);
+        assert_eq!(r.status, QpStatus::Optimal);
+        assert!((v[0] - 1.0 / 3.0).abs() < 1e-14 && (v[1] - 1.0 / 3.0).abs() < 1e-14);
+        assert!(r.iterations >= 3);
+    }
+
+    /// Deterministic pseudo-random numbers in [−1, 1).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> Real {
+            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) as Real
+        }
+    }
+
+    fn random_problem<const NV: usize>(rng: &mut Lcg) -> ([[Real; NV]; NV], [Real; NV], [Real; NV], [Real; NV]) {
+        // H = MᵀM + 0.1 I
+        let mut m = [[0.0; NV]; NV];
+        for row in m.iter_mut() {
+            for x in row.iter_mut() {
+                *x = rng.next();
+            }
+        }
+        let mut h = [[0.0; NV]; NV];
+        for i in 0..NV {
+            for j in 0..NV {
+                for k in 0..NV {
+                    h[i][j] += m[k][i] * m[k][j];
+                }
+            }
+            h[i][i] += 0.1;
+        }
+        let g = core::array::from_fn(|_| 3.0 * rng.next());
+        let lo = core::array::from_fn(|_| -0.5 - 0.5 * rng.next().abs());
+        let hi = core::array::from_fn(|_| 0.5 + 0.5 * rng.next().abs());
+        (h, g, lo, hi)
+    }
+
+    #[test]
+    fn random_problems_satisfy_kkt_cold_and_warm() {
+        let mut rng = Lcg(42);
+        for _ in 0..200 {
+            let (h, g, lo, hi) = random_problem::<12>(&mut rng);
+            let mut qp = BoxQp::<12>::new();
+            qp.factorize(&h).unwrap();
+            let mut v = [0.0; 12];
+            let r = qp.solve(&h, &g, &lo, &hi, &mut v, 200);
+            assert_eq!(r.status, QpStatus::Optimal);
+            assert_kkt(&h, &g, &lo, &hi, &v);
+            // Warm start from the optimal working set with a perturbed gradient.
+            let g2: [Real; 12] = core::array::from_fn(|i| g[i] + 0.1 * rng.next());
+            qp.factorize(&h).unwrap();
+            let mut w = [0.0; 12];
+            let r2 = qp.solve(&h, &g2, &lo, &hi, &mut w, 200);
+            assert_eq!(r2.status, QpStatus::Optimal);
+            assert_kkt(&h, &g2, &lo, &hi, &w);
+        }
+    }
+
+    #[test]
+    fn iteration_cap_returns_a_bounded_iterate_no_worse_than_the_start() {
+        let mut rng = Lcg(7);
+        for _ in 0..50 {
+            let (h, g, lo, hi) = random_problem::<12>(&mut rng);
+            let mut qp = BoxQp::<12>::new();
+            qp.factorize(&h).unwrap();
+            let mut v = [0.0; 12];
+            let start = objective(&h, &g, &v);
+            let r = qp.solve(&h, &g, &lo, &hi, &mut v, 2);
+            assert!(r.iterations <= 2);
+            for i in 0..12 {
+                assert!(v[i] >= lo[i] && v[i] <= hi[i] && v[i].is_finite());
+            }
+            assert!(objective(&h, &g, &v) <= start + 1e-12);
+        }
+    }
+
+    #[test]
+    fn indefinite_hessian_is_reported() {
+        let h = [[1.0, 2.0], [2.0, 1.0]];
+        let mut qp = BoxQp::<2>::new();
+        assert_eq!(qp.factorize(&h), Err(QpStatus::NotPositiveDefinite));
+    }
+
+    #[test]
+    fn factor_updates_match_a_fresh_factorisation() {
+        let mut rng = Lcg(3);
+        let (h, _, _, _) = random_problem::<8>(&mut rng);
+        let mut qp = BoxQp::<8>::new();
+        qp.factorize(&h).unwrap();
+        // Remove positions 3 and 0, append 3 back: compare with factorising that set directly.
+        qp.state[qp.free[3]] = Bound::Lower;
+        qp.remove(3);
+        qp.state[qp.free[0]] = Bound::Upper;
+        qp.remove(0);
+        qp.append(&h, 3).unwrap();
+        qp.state[3] = Bound::Free;
+        // L Lᵀ must equal H_FF in the solver's order.
+        for i in 0..qp.nf {
+            for j in 0..=i {
+                let mut s = 0.0;
+                for k in 0..=j {
+                    s += qp.l[i][k] * qp.l[j][k];
+                }
+                let expect = h[qp.free[i]][qp.free[j]];
+                assert!((s - expect).abs() < 1e-12, "(LLᵀ)[{i}][{j}] = {s} vs {expect}");
+            }
+        }
+    }
+}
