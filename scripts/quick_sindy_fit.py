@@ -39,6 +39,11 @@ Library (the paper's shape, exactly 155 terms, order fixed in ``library_terms``)
       * ``no_yaw``  - additionally exclude every term that involves yaw at all
                       (sin(yaw), cos(yaw), s*sin(yaw), s*cos(yaw)): fully heading-invariant;
       * ``yaw_trig`` - allow sin(yaw), cos(yaw) and s*sin(yaw), s*cos(yaw) (s not x,y,z,yaw).
+      * ``yaw_trig_linear_u`` - ``yaw_trig`` without the state*input products: inputs
+                      enter linearly (as the autopilot's references do), which keeps the
+                      model bounded at saturated inputs.
+      * ``attitude_loops`` - per-row candidates with the structure of the SDK autopilot
+                      (``ATTITUDE_LOOPS``): a physics-informed subset of the same library.
                       World-frame accelerations depend on heading through the body-frame
                       attitude (small-angle: vx' ~ g(pitch cos(yaw) + roll sin(yaw))),
                       so these are physically expected for the vx, vy rows.
@@ -69,7 +74,11 @@ Model selection (held-out run7 only)
       * a free-run simulation of the full 12-state model (RK4, 3 substeps per sample,
         inputs zero-order-held from the log, state reset to the measured state every 30
         samples = about 1 s) which must stay finite and bounded (|v| < 50 m/s,
-        |angle| < pi/2 for roll/pitch, |rates| < 20 rad/s) to be admissible.
+        |angle| < pi/2 for roll/pitch, |rates| < 20 rad/s) to be admissible;
+      * ``horizon_bounded``: one MPC horizon (1 s) from random envelope states under
+        constant (often saturated) inputs must stay bounded too -- the first quick fit
+        passed the logged-input test but grew roll_rate exponentially at saturated
+        u_roll (a +23 roll_rate*u_roll term), which made the MPC's prediction explode.
     Admissible candidates must also have between 1 and MAX_TERMS_PER_ROW terms in every
     row (a row with no term is a degenerate "derivative = 0" model).
     The selected candidate is the admissible one with the lowest score; a sparser
@@ -112,7 +121,7 @@ MAX_TERMS_PER_ROW = 20
 SPARSER_TOLERANCE = 0.02
 RESET_EVERY = 30
 SUBSTEPS = 3
-VARIANTS = ["no_yaw", "yaw_trig"]
+VARIANTS = ["no_yaw", "yaw_trig", "yaw_trig_linear_u", "attitude_loops"]
 
 
 # --------------------------------------------------------------------------- library
@@ -138,6 +147,9 @@ TERM_NAMES = [n for n, _ in TERMS]
 def term_allowed(factors, variant):
     """Translation invariance: no x, y, z. Heading invariance: no raw yaw.
     'yaw_trig' additionally allows sin(yaw)/cos(yaw) factors."""
+    names = [v for _, v in factors]
+    if variant == "yaw_trig_linear_u" and len(factors) > 1 and any(v in INPUTS for v in names):
+        return False
     for fn, v in factors:
         if v in ("x", "y", "z"):
             return False
@@ -247,14 +259,34 @@ def stlsq(Theta, y, threshold, ridge):
     return xi * ys / cs
 
 
+# Per-row candidate terms of the "attitude_loops" variant: the structure of an SDK
+# autopilot seen through the paper's library. Velocities rotate with heading
+# (vx' ~ g(pitch cos yaw + roll sin yaw)) and see linear drag; vz follows u_vz; each
+# attitude rate is a second-order loop on its reference (roll_rate' ~ a(u_roll - roll)
+# - b roll_rate); the yaw rate a first-order loop on u_yaw_rate.
+ATTITUDE_LOOPS = {
+    "vx": ["1", "vx", "roll*sin(yaw)", "roll*cos(yaw)", "pitch*sin(yaw)", "pitch*cos(yaw)"],
+    "vy": ["1", "vy", "roll*sin(yaw)", "roll*cos(yaw)", "pitch*sin(yaw)", "pitch*cos(yaw)"],
+    "vz": ["1", "vz", "u_vz", "cos(roll)", "cos(pitch)"],
+    "roll_rate": ["1", "roll", "roll_rate", "u_roll"],
+    "pitch_rate": ["1", "pitch", "pitch_rate", "u_pitch"],
+    "yaw_rate": ["1", "yaw_rate", "u_yaw_rate"],
+}
+
+
+def allowed_terms(variant, row):
+    if variant == "attitude_loops":
+        return [TERM_NAMES.index(t) for t in ATTITUDE_LOOPS[row]]
+    return [k for k, (_, f) in enumerate(TERMS) if term_allowed(f, variant)]
+
+
 def fit(train, variant, ridge, threshold):
-    allowed = [k for k, (_, f) in enumerate(TERMS) if term_allowed(f, variant)]
     Z = np.vstack([p[0] for p in train])
     dX = np.vstack([p[1] for p in train])
-    Theta = eval_terms(Z, allowed)
     Xi = np.zeros((len(DYNAMIC), len(TERMS)))          # rows: DYNAMIC, cols: TERMS
-    for r in range(len(DYNAMIC)):
-        Xi[r, allowed] = stlsq(Theta, dX[:, r], threshold, ridge)
+    for r, row in enumerate(DYNAMIC):
+        allowed = allowed_terms(variant, row)
+        Xi[r, allowed] = stlsq(eval_terms(Z, allowed), dX[:, r], threshold, ridge)
     return Xi
 
 
@@ -316,6 +348,49 @@ def free_run(model, run, reset_every=RESET_EVERY):
     return True, rmse
 
 
+ENVELOPE_TRIALS = 256
+U_BOUNDS = np.array([5.0, 0.611, 0.611, 5 * math.pi / 6])
+
+
+def horizon_bounded(model, seed=0):
+    """MPC-horizon sanity: from ENVELOPE_TRIALS random states (|roll|, |pitch| <= 0.5,
+    |v| <= 4, |rates| <= 2) under constant random inputs within the MPC bounds (half of
+    them saturated at a corner), 1 s of RK4 (3 substeps per 1/30 s) must stay finite and
+    bounded (|v| < 30, |roll|, |pitch| < 1.2, |rates| < 15). A model that explodes inside
+    one horizon makes the MPC's predictions (and its QP) meaningless."""
+    rng = np.random.default_rng(seed)
+    B = ENVELOPE_TRIALS
+    X = np.zeros((B, 12))
+    X[:, 3:5] = rng.uniform(-0.5, 0.5, (B, 2))
+    X[:, 5] = rng.uniform(-math.pi, math.pi, B)
+    X[:, 6:9] = rng.uniform(-4, 4, (B, 3))
+    X[:, 9:12] = rng.uniform(-2, 2, (B, 3))
+    U = rng.uniform(-1, 1, (B, 4)) * U_BOUNDS
+    U[: B // 2] = np.sign(U[: B // 2]) * U_BOUNDS
+    kin = [(STATES.index(a), STATES.index(b)) for a, b in KINEMATIC]
+    dyn = [STATES.index(s) for s in DYNAMIC]
+
+    def f(X):
+        dX = np.zeros_like(X)
+        for a, b in kin:
+            dX[:, a] = X[:, b]
+        dX[:, dyn] = model.dyn_rhs(np.concatenate([X, U], axis=1))
+        return dX
+
+    h = 1.0 / 30.0 / SUBSTEPS
+    with np.errstate(all="ignore"):
+        for _ in range(30 * SUBSTEPS):
+            k1 = f(X)
+            k2 = f(X + 0.5 * h * k1)
+            k3 = f(X + 0.5 * h * k2)
+            k4 = f(X + h * k3)
+            X = X + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            if not np.all(np.isfinite(X)):
+                return False
+    return bool(np.all(np.abs(X[:, 6:9]) < 30) and np.all(np.abs(X[:, 3:5]) < 1.2)
+                and np.all(np.abs(X[:, 9:12]) < 15))
+
+
 def evaluate(Xi, heldout_run, heldout_prep, always_simulate=False):
     """Held-out metrics. The (slow) free run is skipped, stable = None, for candidates
     whose term counts already make them inadmissible."""
@@ -325,6 +400,7 @@ def evaluate(Xi, heldout_run, heldout_prep, always_simulate=False):
     stable, sim_rmse = None, None
     if always_simulate or 1 <= min(terms) and max(terms) <= MAX_TERMS_PER_ROW:
         stable, sim_rmse = free_run(model, heldout_run)
+        stable = stable and horizon_bounded(model)
     return {
         "rmse": rmse, "rms": rms, "nrmse": rmse / rms, "score": float(np.mean(rmse / rms)),
         "stable": stable, "sim_rmse": sim_rmse, "terms": terms,
@@ -442,10 +518,16 @@ def main():
         f"Savitzky-Golay derivatives (window {SG_WINDOW}, order {SG_ORDER}) of vx vy vz "
         f"roll_rate pitch_rate yaw_rate per file, {SG_WINDOW // 2} edge samples dropped, yaw "
         "unwrapped per file; kinematic rows exact; terms with x, y, z or raw yaw excluded"
-        + ("; sin(yaw)/cos(yaw) and state*sin/cos(yaw) terms allowed" if variant == "yaw_trig"
-           else "; all yaw-dependent terms excluded (heading invariant)")
+        + {"yaw_trig": "; sin(yaw)/cos(yaw) and state*sin/cos(yaw) terms allowed",
+           "yaw_trig_linear_u": "; sin/cos(yaw) products allowed, state*input products excluded",
+           "attitude_loops": "; per-row candidates with the SDK autopilot's structure (velocity rows: "
+                             "1, own velocity, roll/pitch times sin/cos(yaw); vz: 1, vz, u_vz, cos(roll), "
+                             "cos(pitch); attitude-rate rows: 1, angle, rate, reference; yaw_rate: 1, "
+                             "yaw_rate, u_yaw_rate)",
+           "no_yaw": "; all yaw-dependent terms excluded (heading invariant)"}[variant]
         + f"; library variant, ridge and threshold chosen on held-out run{HELDOUT_RUN} "
-        "(mean normalised one-step derivative RMSE, free-run stability)")
+        "(mean normalised one-step derivative RMSE, free-run stability on the log and over one "
+        "MPC horizon from random envelope states under saturated inputs)")
     out = {
         "format": "uavgen-model/1",
         "kind": "sindy",

@@ -38,7 +38,17 @@ pub struct MpcOptions {
 
 /// Default weight of a state: 2 on positions x, y, z (by name), 0 elsewhere.
 fn default_q(model: &Model) -> Vec<f64> {
-    model.states.iter().map(|s| if matches!(s.as_str(), "x" | "y" | "z") { 2.0 } else { 0.0 }).collect()
+    model
+        .states
+        .iter()
+        .map(|s| {
+            if matches!(s.as_str(), "x" | "y" | "z") {
+                2.0
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 /// Default bound of an input by name (the paper's), ±1 for other names.
@@ -102,9 +112,19 @@ impl MpcOptions {
         }
         let regularisation = file.regularisation.unwrap_or(d.regularisation);
         if !(regularisation.is_finite() && regularisation >= 0.0) {
-            return Err(format!("{label}: regularisation must be finite and ≥ 0, found {regularisation}"));
+            return Err(format!(
+                "{label}: regularisation must be finite and ≥ 0, found {regularisation}"
+            ));
         }
-        Ok(Self { q, q_terminal, r, u_min, u_max, max_qp_iterations, regularisation })
+        Ok(Self {
+            q,
+            q_terminal,
+            r,
+            u_min,
+            u_max,
+            max_qp_iterations,
+            regularisation,
+        })
     }
 
     /// Read and validate an options file for `model`.

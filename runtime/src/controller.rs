@@ -251,7 +251,10 @@ where
                 qp_iterations: 0,
                 cost: R::INFINITY,
             };
-            return Err(ControlError { kind: ControlErrorKind::NotPrepared, solution });
+            return Err(ControlError {
+                kind: ControlErrorKind::NotPrepared,
+                solution,
+            });
         }
         let state_ok = x0.iter().all(|v| v.is_finite());
         let mut solution = self.solver.feedback(x0);
@@ -311,7 +314,10 @@ where
     pub fn step(&mut self, x0: &[R; NX]) -> Result<Solution<R, NU>, ControlError<R, NU>> {
         let feedback = self.feedback(x0);
         match (feedback, self.prepare_next()) {
-            (Ok(solution), Err(e)) => Err(ControlError { kind: ControlErrorKind::Reference(e), solution }),
+            (Ok(solution), Err(e)) => Err(ControlError {
+                kind: ControlErrorKind::Reference(e),
+                solution,
+            }),
             (feedback, _) => feedback,
         }
     }

@@ -6,7 +6,7 @@
 //!   functions the runtime needs (through `libm`);
 //! - [`MpcSolver`]: the interface of a real-time-iteration MPC solver, generic over its sizes, and
 //!   [`mpc_adapter!`], which implements it for the `Mpc` of a generated crate;
-//! - [`reference`]: reference windows for the horizon — the paper's built-in trajectories
+//! - [`reference`](mod@reference): reference windows for the horizon — the paper's built-in trajectories
 //!   ([`Trajectory`]), a constant reference, a closure, and a time-stamped [`SetpointBuffer`];
 //! - [`Controller`]: the RTI timeline (`feedback` → apply the input → `prepare_next`), input and
 //!   output validation, and cycle-counter timings ([`CycleCounter`], [`Timings`]).
@@ -55,9 +55,7 @@ mod real;
 pub mod reference;
 pub mod solver;
 
-pub use controller::{
-    ControlError, ControlErrorKind, Controller, CycleCounter, CycleStats, NoCycleCounter, Timings,
-};
+pub use controller::{ControlError, ControlErrorKind, Controller, CycleCounter, CycleStats, NoCycleCounter, Timings};
 pub use real::Real;
 pub use reference::{
     ConstantReference, FnReference, Interpolation, ReferenceError, ReferenceSource, SetpointBuffer, SetpointError,

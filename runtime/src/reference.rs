@@ -159,9 +159,7 @@ impl<R: Real, const NX: usize, const N1: usize> ReferenceSource<R, NX, N1> for C
 #[derive(Clone, Copy, Debug)]
 pub struct FnReference<F>(pub F);
 
-impl<R: Real, F: FnMut(R) -> [R; NX], const NX: usize, const N1: usize> ReferenceSource<R, NX, N1>
-    for FnReference<F>
-{
+impl<R: Real, F: FnMut(R) -> [R; NX], const NX: usize, const N1: usize> ReferenceSource<R, NX, N1> for FnReference<F> {
     fn window(&mut self, t0: R, dt: R, out: &mut [[R; NX]; N1]) -> Result<(), ReferenceError> {
         fill_window(t0, dt, out, &mut self.0)
     }
@@ -228,7 +226,10 @@ impl<R: Real, const NX: usize, const CAP: usize> Default for SetpointBuffer<R, N
 impl<R: Real, const NX: usize, const CAP: usize> SetpointBuffer<R, NX, CAP> {
     /// An empty buffer.
     pub const fn new(interpolation: Interpolation) -> Self {
-        Self { points: Deque::new(), interpolation }
+        Self {
+            points: Deque::new(),
+            interpolation,
+        }
     }
 
     /// The interpolation in use.

@@ -117,9 +117,10 @@ where
 /// provide the generated MPC API of docs/mpc.md (`Real`, `NX`, `NU`, `N`, `DT`, `U_MIN`, `U_MAX`,
 /// `Status`, `Solution`, `Mpc`).
 ///
-/// The new type has `new()` (= `Mpc::new()`), `Default`, `initialize`, `inner()`, `inner_mut()`,
-/// `into_inner()`, `planned_inputs()` and `predicted_states()`; the trait methods forward to the
-/// `Mpc` and convert its `Status` and `Solution` into the runtime's.
+/// The new type has the inherent methods `const fn new()` (= `Mpc::new()`, which generated crates
+/// declare `const`, so the solver can be a `static`), `inner()`, `inner_mut()`, `into_inner()`,
+/// `planned_inputs()` and `predicted_states()`, implements `Default`, and implements the trait by
+/// forwarding to the `Mpc` and converting its `Status` and `Solution` into the runtime's.
 #[macro_export]
 macro_rules! mpc_adapter {
     ($(#[$attr:meta])* $vis:vis struct $name:ident($krate:ident) $(;)?) => {
@@ -128,9 +129,10 @@ macro_rules! mpc_adapter {
 
         #[allow(dead_code)]
         impl $name {
-            /// A solver with the generated crate's initial guess (`Mpc::new()`).
+            /// A solver with the generated crate's initial guess (`Mpc::new()`). `const`, so the
+            /// solver can be a `static` initialised at compile time (no copy through the stack).
             #[inline]
-            pub fn new() -> Self {
+            pub const fn new() -> Self {
                 Self($krate::Mpc::new())
             }
             /// The generated `Mpc`.

@@ -34,7 +34,10 @@ pub struct Solution {
     pub cost: Real,
 }
 
+/// `repr(u8)` with `Stale` first makes `Mpc::new()` all zero bits, so a static
+/// solver lands in .bss instead of being copied from flash.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 enum Phase {
     /// No QP data for the current guess.
     Stale,
@@ -83,6 +86,7 @@ fn all_finite(values: &[Real]) -> bool {
 }
 
 #[inline]
+#[allow(clippy::manual_clamp)] // `clamp` would pass a NaN through; max/min map it to a bound
 fn clamp_input(u: &[Real; NU]) -> [Real; NU] {
     let mut out = [0.0; NU];
     for i in 0..NU {
@@ -123,6 +127,20 @@ impl Mpc {
         self.xs = [*x0; N + 1];
         self.us = [u; N];
         self.phase = Phase::Stale;
+    }
+
+    /// Set the whole guess (e.g. from an external planner); inputs are clamped
+    /// into the bounds. Returns false, changing nothing, if a value is not finite.
+    pub fn set_guess(&mut self, xs: &[[Real; NX]; N + 1], us: &[[Real; NU]; N]) -> bool {
+        if !xs.iter().all(|x| all_finite(x)) || !us.iter().all(|u| all_finite(u)) {
+            return false;
+        }
+        self.xs = *xs;
+        for k in 0..N {
+            self.us[k] = clamp_input(&us[k]);
+        }
+        self.phase = Phase::Stale;
+        true
     }
 
     /// Planned inputs ū₀..ū_{N−1} of the current guess.
@@ -307,7 +325,12 @@ impl Mpc {
 
     /// The previous plan: its first input, nothing changed.
     fn keep_plan(&mut self, status: Status) -> Solution {
-        Solution { u0: clamp_input(&self.us[0]), status, qp_iterations: 0, cost: self.cost() }
+        Solution {
+            u0: clamp_input(&self.us[0]),
+            status,
+            qp_iterations: 0,
+            cost: self.cost(),
+        }
     }
 
     /// ½ Σₖ₌₀ᴺ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ ūₖᵀ R ūₖ of the guess (0 without a reference).
@@ -408,7 +431,9 @@ impl Mpc {
 
         // Box QP from v = 0 (ū is feasible, so 0 is in the box) with the warm-start working set.
         self.v = [0.0; NV];
-        let mut result = self.qp.solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS);
+        let mut result = self
+            .qp
+            .solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS);
         let mut regularised = regularised;
         if result.status == QpStatus::NotPositiveDefinite {
             // An append found H_FF not numerically positive definite: regularise and solve again.
@@ -416,7 +441,9 @@ impl Mpc {
                 true => {
                     regularised = true;
                     self.v = [0.0; NV];
-                    let again = self.qp.solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS);
+                    let again = self
+                        .qp
+                        .solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS);
                     result.iterations += again.iterations;
                     result.status = again.status;
                 }
@@ -432,9 +459,7 @@ impl Mpc {
 
         // Update the guess: δx₀ = z₀, δxₖ₊₁ = Aₖ δxₖ + Bₖ vₖ + cₖ; x̄ += δx, ū += v.
         let (xs_before, us_before) = (self.xs, self.us);
-        for i in 0..NX {
-            self.xs[0][i] = x0[i];
-        }
+        self.xs[0] = *x0;
         let mut dx = self.z[0];
         for k in 0..N {
             let (a, b) = (&self.a[k], &self.b[k]);
@@ -463,7 +488,12 @@ impl Mpc {
             self.us = us_before;
             return self.keep_plan(Status::NumericalFailure);
         }
-        Solution { u0: self.us[0], status, qp_iterations: result.iterations, cost: self.cost() }
+        Solution {
+            u0: self.us[0],
+            status,
+            qp_iterations: result.iterations,
+            cost: self.cost(),
+        }
     }
 
     fn feedback_after_failed_prepare(&mut self, x0: &[Real; NX], status: Status) -> Solution {
@@ -520,6 +550,7 @@ impl Mpc {
 }
 
 #[cfg(test)]
+#[allow(clippy::modulo_one)] // NU = 1 in the template's example model
 mod tests {
     use super::*;
 
@@ -574,7 +605,12 @@ mod tests {
         let dense = dense_hessian(&mpc);
         for r in 0..NV {
             for c in 0..NV {
-                assert!((mpc.h[r][c] - dense[r][c]).abs() < 1e-12, "H[{r}][{c}] = {} vs {}", mpc.h[r][c], dense[r][c]);
+                assert!(
+                    (mpc.h[r][c] - dense[r][c]).abs() < 1e-12,
+                    "H[{r}][{c}] = {} vs {}",
+                    mpc.h[r][c],
+                    dense[r][c]
+                );
             }
         }
     }
@@ -628,7 +664,10 @@ mod tests {
         let mut mpc = Mpc::new();
         let s = mpc.solve(&[0.0, 0.0], &reference(100.0));
         assert_eq!(s.u0[0], U_MAX[0]);
-        assert!(mpc.planned_inputs().iter().all(|u| u[0] <= U_MAX[0] && u[0] >= U_MIN[0]));
+        assert!(mpc
+            .planned_inputs()
+            .iter()
+            .all(|u| u[0] <= U_MAX[0] && u[0] >= U_MIN[0]));
     }
 
     #[test]

@@ -246,7 +246,7 @@ impl<const NV: usize> BoxQp<NV> {
             };
         }
         let scale = g.iter().fold(1.0 as Real, |m, x| m.max(x.abs()));
-        let tolerance = 1e4 * Real::EPSILON * scale;
+        let tolerance = 10.0 * Real::EPSILON * scale;
         let mut iterations = 0;
         while iterations < max_iterations {
             iterations += 1;
@@ -269,7 +269,11 @@ impl<const NV: usize> BoxQp<NV> {
             for i in 0..self.nf {
                 let var = self.free[i];
                 let d = self.rhs[i] - v[var];
-                let (limit, bound) = if d < 0.0 { (lo[var], Bound::Lower) } else { (hi[var], Bound::Upper) };
+                let (limit, bound) = if d < 0.0 {
+                    (lo[var], Bound::Lower)
+                } else {
+                    (hi[var], Bound::Upper)
+                };
                 if d != 0.0 {
                     let a = (limit - v[var]) / d;
                     if a < alpha {
@@ -310,16 +314,27 @@ impl<const NV: usize> BoxQp<NV> {
                 }
             }
             match release {
-                None => return QpResult { status: QpStatus::Optimal, iterations },
+                None => {
+                    return QpResult {
+                        status: QpStatus::Optimal,
+                        iterations,
+                    }
+                }
                 Some(j) => {
                     if self.append(h, j).is_err() {
-                        return QpResult { status: QpStatus::NotPositiveDefinite, iterations };
+                        return QpResult {
+                            status: QpStatus::NotPositiveDefinite,
+                            iterations,
+                        };
                     }
                     self.state[j] = Bound::Free;
                 }
             }
         }
-        QpResult { status: QpStatus::IterationCap, iterations }
+        QpResult {
+            status: QpStatus::IterationCap,
+            iterations,
+        }
     }
 }
 
@@ -340,9 +355,21 @@ mod tests {
     }
 
     /// KKT of the box QP: gradient zero on free variables, sign-correct at bounds.
-    fn assert_kkt<const NV: usize>(h: &[[Real; NV]; NV], g: &[Real; NV], lo: &[Real; NV], hi: &[Real; NV], v: &[Real; NV]) {
+    fn assert_kkt<const NV: usize>(
+        h: &[[Real; NV]; NV],
+        g: &[Real; NV],
+        lo: &[Real; NV],
+        hi: &[Real; NV],
+        v: &[Real; NV],
+    ) {
         for i in 0..NV {
-            assert!(v[i] >= lo[i] && v[i] <= hi[i], "v[{i}] = {} outside [{}, {}]", v[i], lo[i], hi[i]);
+            assert!(
+                v[i] >= lo[i] && v[i] <= hi[i],
+                "v[{i}] = {} outside [{}, {}]",
+                v[i],
+                lo[i],
+                hi[i]
+            );
             let mut grad = g[i];
             for j in 0..NV {
                 grad += h[i][j] * v[j];
@@ -413,7 +440,10 @@ mod tests {
     struct Lcg(u64);
     impl Lcg {
         fn next(&mut self) -> Real {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) as Real
         }
     }

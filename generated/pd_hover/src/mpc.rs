@@ -37,7 +37,10 @@ pub struct Solution {
     /// ½ Σ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ ūₖᵀ R ūₖ of the plan after this step.
     pub cost: Real,
 }
+/// `repr(u8)` with `Stale` first makes `Mpc::new()` all zero bits, so a static
+/// solver lands in .bss instead of being copied from flash.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 enum Phase {
     /// No QP data for the current guess.
     Stale,
@@ -82,6 +85,7 @@ fn all_finite(values: &[Real]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
 #[inline]
+#[allow(clippy::manual_clamp)]
 fn clamp_input(u: &[Real; NU]) -> [Real; NU] {
     let mut out = [0.0; NU];
     for i in 0..NU {
@@ -119,6 +123,19 @@ impl Mpc {
         self.xs = [*x0; N + 1];
         self.us = [u; N];
         self.phase = Phase::Stale;
+    }
+    /// Set the whole guess (e.g. from an external planner); inputs are clamped
+    /// into the bounds. Returns false, changing nothing, if a value is not finite.
+    pub fn set_guess(&mut self, xs: &[[Real; NX]; N + 1], us: &[[Real; NU]; N]) -> bool {
+        if !xs.iter().all(|x| all_finite(x)) || !us.iter().all(|u| all_finite(u)) {
+            return false;
+        }
+        self.xs = *xs;
+        for k in 0..N {
+            self.us[k] = clamp_input(&us[k]);
+        }
+        self.phase = Phase::Stale;
+        true
     }
     /// Planned inputs ū₀..ū_{N−1} of the current guess.
     pub fn planned_inputs(&self) -> &[[Real; NU]; N] {
@@ -416,9 +433,7 @@ impl Mpc {
             QpStatus::NotPositiveDefinite => Status::HessianRegularised,
         };
         let (xs_before, us_before) = (self.xs, self.us);
-        for i in 0..NX {
-            self.xs[0][i] = x0[i];
-        }
+        self.xs[0] = *x0;
         let mut dx = self.z[0];
         for k in 0..N {
             let (a, b) = (&self.a[k], &self.b[k]);

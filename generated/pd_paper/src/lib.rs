@@ -7,6 +7,7 @@
 `no_std`, no allocation, no `unsafe`; sizes are constants. x = [x, y, z, roll, pitch, yaw, vx, vy, vz, roll_rate, pitch_rate, yaw_rate], u = [u_vz, u_roll, u_pitch, u_yaw_rate].*/
 #![no_std]
 #![forbid(unsafe_code)]
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 #[rustfmt::skip]
 mod dims;
 #[rustfmt::skip]

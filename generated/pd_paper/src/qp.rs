@@ -229,7 +229,7 @@ impl<const NV: usize> BoxQp<NV> {
             };
         }
         let scale = g.iter().fold(1.0 as Real, |m, x| m.max(x.abs()));
-        let tolerance = 1e4 * Real::EPSILON * scale;
+        let tolerance = 10.0 * Real::EPSILON * scale;
         let mut iterations = 0;
         while iterations < max_iterations {
             iterations += 1;

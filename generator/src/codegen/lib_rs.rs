@@ -56,6 +56,9 @@ pub fn emit(model: &Model, ir: &ModelIr) -> TokenStream {
         #![doc = #doc]
         #![no_std]
         #![forbid(unsafe_code)]
+        // Numeric kernels index several fixed-size arrays with one loop variable, and
+        // `!(a > b)` is the NaN-safe comparison the factorisation needs.
+        #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
         #[rustfmt::skip]
         mod dims;

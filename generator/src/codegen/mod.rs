@@ -188,8 +188,15 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
             rs_header.clone() + &prettyplease::unparse(&splice::math(&used_math)),
         ),
     ];
-    for (name, source) in [("src/rk4.rs", splice::RK4_RS), ("src/qp.rs", splice::QP_RS), ("src/mpc.rs", splice::MPC_RS)] {
-        files.push((PathBuf::from(name), rs_header.clone() + &prettyplease::unparse(&splice::template(source))));
+    for (name, source) in [
+        ("src/rk4.rs", splice::RK4_RS),
+        ("src/qp.rs", splice::QP_RS),
+        ("src/mpc.rs", splice::MPC_RS),
+    ] {
+        files.push((
+            PathBuf::from(name),
+            rs_header.clone() + &prettyplease::unparse(&splice::template(source)),
+        ));
     }
     Ok(GeneratedCrate {
         crate_name,

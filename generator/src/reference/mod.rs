@@ -3,8 +3,9 @@
 //! QP of each iteration solved by clarabel. Tests compare the generated
 //! solver against it.
 //!
-//! - [`linearize`]: x⁺ = F(x, u) and (A, B) by RK4 with forward sensitivities;
-//! - [`mpc`]: [`GenericMpc`].
+//! - `linearize`: x⁺ = F(x, u) and (A, B) by RK4 with forward sensitivities
+//!   ([`discrete_linearization`]);
+//! - `mpc`: the solver, [`GenericMpc`].
 
 pub mod linearize;
 pub mod mpc;

@@ -1,0 +1,156 @@
+//! Shared part of the firmware example: the DWT cycle counter, the telemetry a debugger reads, and
+//! the control loop (the circular trajectory, with the model itself as a stand-in for the aircraft).
+//!
+//! The binaries (`src/bin/*.rs`) only pick a generated crate, wrap its `Mpc` with
+//! `uavgen_runtime::mpc_adapter!`, and call [`fly`].
+#![no_std]
+#![forbid(unsafe_code)]
+
+use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
+
+use cortex_m::peripheral::DWT;
+use panic_halt as _;
+use uavgen_runtime::{ControlErrorKind, Controller, CycleCounter, MpcSolver, Real, Trajectory};
+
+/// Core clock in Hz: the STM32H743's reset clock (HSI, 64 MHz). A real board sets up its PLL
+/// (up to 480 MHz) and puts the resulting frequency here.
+pub const CPU_HZ: u32 = 64_000_000;
+
+/// The Cortex-M DWT cycle counter (`CYCCNT`, wraps every 2³² cycles).
+pub struct DwtCycles;
+
+impl CycleCounter for DwtCycles {
+    #[inline]
+    fn cycles(&mut self) -> u32 {
+        DWT::cycle_count()
+    }
+}
+
+/// What the loop publishes for a debugger (`print uavgen_firmware_example::TELEMETRY`).
+pub struct Telemetry {
+    /// Control periods completed.
+    pub steps: AtomicU32,
+    /// Cycles of the latest / the slowest `feedback` (measurement in → input out).
+    pub feedback_cycles_last: AtomicU32,
+    /// See `feedback_cycles_last`.
+    pub feedback_cycles_max: AtomicU32,
+    /// Cycles of the latest / the slowest `prepare_next` (shift, reference, linearise, condense).
+    pub prepare_cycles_last: AtomicU32,
+    /// See `prepare_cycles_last`.
+    pub prepare_cycles_max: AtomicU32,
+    /// Feedback errors (the input was still applied: it is always finite and within bounds).
+    pub feedback_errors: AtomicU32,
+    /// The latest error: 0 none, 1 invalid state, 2 not prepared, 3 non-finite input, 4 input
+    /// clamped, 5 solver invalid input, 6 numerical failure, 7 reference.
+    pub last_error: AtomicU32,
+    /// Reference-window errors of `prepare_next`.
+    pub reference_errors: AtomicU32,
+    /// Distance from the reference position, in mm.
+    pub position_error_mm: AtomicU32,
+    /// Periods whose computation overran DT.
+    pub overruns: AtomicU32,
+}
+
+impl Telemetry {
+    const fn new() -> Self {
+        Self {
+            steps: AtomicU32::new(0),
+            feedback_cycles_last: AtomicU32::new(0),
+            feedback_cycles_max: AtomicU32::new(0),
+            prepare_cycles_last: AtomicU32::new(0),
+            prepare_cycles_max: AtomicU32::new(0),
+            feedback_errors: AtomicU32::new(0),
+            last_error: AtomicU32::new(0),
+            reference_errors: AtomicU32::new(0),
+            position_error_mm: AtomicU32::new(0),
+            overruns: AtomicU32::new(0),
+        }
+    }
+}
+
+/// The loop's published state.
+pub static TELEMETRY: Telemetry = Telemetry::new();
+
+fn error_code(kind: ControlErrorKind) -> u32 {
+    match kind {
+        ControlErrorKind::InvalidState => 1,
+        ControlErrorKind::NotPrepared => 2,
+        ControlErrorKind::NonFiniteInput => 3,
+        ControlErrorKind::InputClamped => 4,
+        ControlErrorKind::SolverInvalidInput => 5,
+        ControlErrorKind::NumericalFailure => 6,
+        ControlErrorKind::Reference(_) => 7,
+    }
+}
+
+/// Enable the caches (the solver's matrices live in AXI SRAM) and the cycle counter.
+pub fn init_core() {
+    if let Some(mut cp) = cortex_m::Peripherals::take() {
+        cp.SCB.enable_icache();
+        cp.SCB.enable_dcache(&mut cp.CPUID);
+        cp.DCB.enable_trace();
+        cp.DWT.enable_cycle_counter();
+    }
+}
+
+/// Fly the circular trajectory forever: every DT, feedback → apply → prepare_next, with `plant`
+/// (the generated `discrete_dynamics`) standing in for the aircraft and its sensors.
+pub fn fly<S, R, const NX: usize, const NU: usize, const N1: usize>(
+    solver: S,
+    plant: fn(&[R; NX], &[R; NU]) -> [R; NX],
+    x0: [R; NX],
+) -> !
+where
+    R: Real,
+    S: MpcSolver<R, NX, NU, N1>,
+{
+    let mut controller = Controller::with_counter(solver, Trajectory::Circular, DwtCycles);
+    controller.initialize(&x0, &[R::ZERO; NU]);
+    if controller.start(R::ZERO).is_err() {
+        TELEMETRY.reference_errors.fetch_add(1, Relaxed);
+    }
+    let dt = <S as MpcSolver<R, NX, NU, N1>>::DT.to_f64();
+    let period = (f64::from(CPU_HZ) * dt) as u32;
+    let mut x = x0;
+    let mut tick = DWT::cycle_count();
+    loop {
+        // 1. Measure (here: the simulated state). 2. Feedback: the low-latency part.
+        let u = match controller.feedback(&x) {
+            Ok(solution) => solution.u0,
+            Err(error) => {
+                TELEMETRY.feedback_errors.fetch_add(1, Relaxed);
+                TELEMETRY.last_error.store(error_code(error.kind), Relaxed);
+                error.solution.u0
+            }
+        };
+        // 3. Apply the input: the stand-in aircraft moves one sample.
+        x = plant(&x, &u);
+        // 4. Prepare the next sample while waiting for it.
+        if controller.prepare_next().is_err() {
+            TELEMETRY.reference_errors.fetch_add(1, Relaxed);
+        }
+
+        let reference = controller.reference_window().first().copied().unwrap_or([R::ZERO; NX]);
+        let mut e2 = R::ZERO;
+        for (xi, ri) in x.iter().zip(reference.iter()).take(3) {
+            e2 += (*xi - *ri) * (*xi - *ri);
+        }
+        let t = controller.timings();
+        TELEMETRY.steps.store(controller.step_count(), Relaxed);
+        TELEMETRY.feedback_cycles_last.store(t.feedback.last, Relaxed);
+        TELEMETRY.feedback_cycles_max.store(t.feedback.max, Relaxed);
+        TELEMETRY.prepare_cycles_last.store(t.prepare.last, Relaxed);
+        TELEMETRY.prepare_cycles_max.store(t.prepare.max, Relaxed);
+        TELEMETRY
+            .position_error_mm
+            .store((e2.sqrt().to_f64() * 1000.0) as u32, Relaxed);
+
+        // 5. Wait for the next period (a real board would sleep until a timer interrupt).
+        tick = tick.wrapping_add(period);
+        if (DWT::cycle_count().wrapping_sub(tick) as i32) >= 0 {
+            TELEMETRY.overruns.fetch_add(1, Relaxed);
+            tick = DWT::cycle_count();
+        }
+        while (DWT::cycle_count().wrapping_sub(tick) as i32) < 0 {}
+    }
+}

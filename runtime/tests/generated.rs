@@ -1,0 +1,107 @@
+//! `mpc_adapter!` and the controller with the real generated crates: the adapter compiles against
+//! every shipped crate's API, and the controller closes the loop on the circular trajectory with
+//! the model itself as the plant.
+
+use uavgen_runtime::{mpc_adapter, ControlErrorKind, Controller, MpcSolver, Status, Trajectory};
+
+mpc_adapter!(
+    /// The SINDy M100 MPC (f64).
+    pub struct SindyMpc(sindy_m100);
+);
+mpc_adapter!(struct PdHoverF32Mpc(pd_hover_f32));
+mpc_adapter!(struct PdHoverMpc(pd_hover));
+mpc_adapter!(struct PdPaperMpc(pd_paper));
+
+/// Constants and sizes come through the trait.
+#[test]
+fn adapter_constants() {
+    fn sizes<R, S, const NX: usize, const NU: usize, const N1: usize>(_: &S) -> (usize, usize, usize)
+    where
+        R: uavgen_runtime::Real,
+        S: MpcSolver<R, NX, NU, N1>,
+    {
+        (NX, NU, N1)
+    }
+    let s = SindyMpc::new();
+    assert_eq!(sizes(&s), (12, 4, sindy_m100::N + 1));
+    assert_eq!(<SindyMpc as MpcSolver<f64, 12, 4, 31>>::DT, sindy_m100::DT);
+    assert_eq!(<SindyMpc as MpcSolver<f64, 12, 4, 31>>::U_MIN, sindy_m100::U_MIN);
+    assert_eq!(<PdHoverF32Mpc as MpcSolver<f32, 12, 4, 31>>::U_MAX, pd_hover_f32::U_MAX);
+    assert_eq!(sizes(&PdHoverMpc::default()), (12, 4, 31));
+    assert_eq!(sizes(&PdPaperMpc::default()), (12, 4, 31));
+    // A static initialised at compile time (the firmware example's way to avoid a stack copy).
+    static _SOLVER: SindyMpc = SindyMpc::new();
+}
+
+/// (RMS position error over the last two thirds, number of feedback errors) of a circle flight of
+/// `steps` samples starting away from the circle.
+macro_rules! circle_flight {
+    ($krate:ident, $adapter:ident, $steps:expr) => {{
+        use $krate::{Real, NX};
+        let mut solver = Box::new($adapter::new());
+        let mut x = [0.0 as Real; NX];
+        x[0] = 3.0;
+        x[1] = 3.0;
+        x[2] = 5.0;
+        solver.initialize(&x, &[0.0; 4]);
+        let mut controller = Controller::new(&mut *solver, Trajectory::Circular);
+        assert_eq!(controller.start(0.0), Ok(Status::Solved));
+        let (mut err2, mut count, mut errors) = (0.0f64, 0usize, 0usize);
+        let (lo, hi) = ($krate::U_MIN, $krate::U_MAX);
+        for step in 0..$steps {
+            let u = match controller.feedback(&x) {
+                Ok(s) => s.u0,
+                Err(e) => {
+                    // The solver may report a transient failure (it keeps its previous plan);
+                    // the runtime's own corrections would mean a solver bug.
+                    assert!(
+                        matches!(
+                            e.kind,
+                            ControlErrorKind::NumericalFailure | ControlErrorKind::SolverInvalidInput
+                        ),
+                        "step {step}: {e}"
+                    );
+                    errors += 1;
+                    e.solution.u0
+                }
+            };
+            assert!((0..4).all(|i| u[i] >= lo[i] && u[i] <= hi[i]), "step {step}: {u:?}");
+            x = $krate::discrete_dynamics(&x, &u);
+            controller.prepare_next().unwrap();
+            // The new time's reference row 0 is the target for the state just reached.
+            let r = controller.reference_window()[0];
+            if step >= $steps / 3 {
+                for i in 0..3 {
+                    let e = (x[i] - r[i]) as f64;
+                    err2 += e * e;
+                }
+                count += 3;
+            }
+        }
+        assert_eq!(controller.step_count(), $steps);
+        // A NaN measurement: the previous plan's input, flagged.
+        let mut bad = x;
+        bad[3] = Real::NAN;
+        let e = controller.feedback(&bad).unwrap_err();
+        assert_eq!(e.kind, ControlErrorKind::InvalidState);
+        assert_eq!(e.solution.status, Status::InvalidInput);
+        assert!(e.solution.u0.iter().all(|u| u.is_finite()));
+        ((err2 / count as f64).sqrt(), errors)
+    }};
+}
+
+#[test]
+fn sindy_m100_tracks_the_circle() {
+    let (rmse, errors) = circle_flight!(sindy_m100, SindyMpc, 450);
+    eprintln!("sindy_m100 through the runtime: circle RMSE {rmse:.3} m, {errors} solver errors in 450 samples");
+    assert!(rmse < 0.25, "RMSE {rmse}");
+    assert!(errors < 23, "{errors} solver errors");
+}
+
+#[test]
+fn pd_hover_f32_tracks_the_circle() {
+    let (rmse, errors) = circle_flight!(pd_hover_f32, PdHoverF32Mpc, 450);
+    eprintln!("pd_hover_f32 through the runtime: circle RMSE {rmse:.3} m, {errors} solver errors in 450 samples");
+    assert!(rmse < 0.25, "RMSE {rmse}");
+    assert!(errors < 23, "{errors} solver errors");
+}
