@@ -3,7 +3,7 @@
 #  1. installs what the tests need (the thumbv7em target, clippy, rustfmt);
 #  2. checks formatting and clippy;
 #  3. regenerates generated/ and fails if the checked-in crates differ;
-#  4. builds the no_std crates for thumbv7em-none-eabihf;
+#  4. builds the no_std crates and the firmware example for thumbv7em-none-eabihf;
 #  5. runs all unit, property, reference and CLI tests (release build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,6 +27,9 @@ fi
 echo "== no_std crates build for thumbv7em-none-eabihf"
 cargo build --release -q --target thumbv7em-none-eabihf \
     -p uavgen-templates -p uavgen-runtime -p pd_paper -p pd_hover -p pd_hover_f32 -p sindy_m100
+
+echo "== firmware example links a generated solver (thumbv7em-none-eabihf, panic = abort)"
+(cd runtime/firmware-example && cargo build --release -q)
 
 echo "== tests"
 log=$(mktemp)

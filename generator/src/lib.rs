@@ -5,6 +5,7 @@
 //! [`discretize`] (RK4 substep choice) → [`codegen`] (one `TokenStream` per
 //! module, spliced templates, prettyplease, atomic write).
 
+pub mod bench;
 pub mod codegen;
 pub mod discretize;
 pub mod ir;

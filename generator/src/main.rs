@@ -27,6 +27,38 @@ enum Command {
     ImportPysindy(ImportArgs),
     /// Validate a model file and print its summary (sizes, sparsity, substeps).
     Check(CheckArgs),
+    /// Worst-case benchmark of a generated crate (see docs/benchmarks.md).
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// The generated crate to benchmark.
+    #[arg(long = "crate")]
+    crate_dir: PathBuf,
+    /// Its model file: also time the generic reference solver (interpreted + clarabel) side by side.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// RTI steps per trajectory (3 trajectories).
+    #[arg(long, default_value_t = 3334)]
+    steps: usize,
+    /// Steps per trajectory for the generic solver.
+    #[arg(long, default_value_t = 100)]
+    generic_steps: usize,
+    /// Count instructions of this many RTI steps under callgrind (0: skip).
+    #[arg(long, default_value_t = 0)]
+    instructions: usize,
+    /// Build with -C target-cpu=native.
+    #[arg(long)]
+    native: bool,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Scratch directory for the harness crate and its build.
+    #[arg(long, default_value = "target/uavgen-bench")]
+    work_dir: PathBuf,
+    /// Also write the results as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -105,6 +137,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::ImportPysindy(args)) => import_pysindy(args),
         Some(Command::Check(args)) => check(args),
+        Some(Command::Bench(args)) => bench(args),
         None => generate(cli.generate),
     };
     match result {
@@ -225,5 +258,86 @@ fn check(args: CheckArgs) -> Result<(), String> {
         "  RK4 at {} Hz: {} substeps (stiffest eigenvalue {:.2}{:+.2}i 1/s over {} envelope points)",
         args.rate, choice.substeps, choice.stiffest.re, choice.stiffest.im, choice.points
     );
+    Ok(())
+}
+
+fn bench(args: BenchArgs) -> Result<(), String> {
+    use uavgen::bench::*;
+    if args.steps == 0 {
+        return Err("--steps must be at least 1".into());
+    }
+    let work_dir = std::path::absolute(&args.work_dir).map_err(|e| format!("{}: {e}", args.work_dir.display()))?;
+    let options = BenchOptions {
+        steps: args.steps,
+        seed: args.seed,
+        generic_steps: args.generic_steps,
+        instruction_steps: args.instructions,
+        native: args.native,
+        work_dir,
+    };
+    let dims = read_crate_dims(&args.crate_dir)?;
+    let model = match &args.model {
+        Some(p) => Some(uavgen::load(p).map_err(|e| e.to_string())?),
+        None => None,
+    };
+    eprintln!("building the harness for {} ...", args.crate_dir.display());
+    let (name, binary) = build_harness(&args.crate_dir, &options)?;
+    eprintln!("running {} RTI steps on each of 3 trajectories ...", options.steps);
+    let timing = run_harness(&binary, &name, &options)?;
+    let us = |ns: f64| ns / 1000.0;
+    println!(
+        "{name}: {} RTI steps (N = {}, {} substeps), pinned to one core: {}",
+        timing.steps, dims.horizon, dims.substeps, timing.pinned
+    );
+    println!("  phase      median      p99    p99.9      max   [µs]");
+    for (phase, q) in [
+        ("prepare", timing.prepare_ns),
+        ("feedback", timing.feedback_ns),
+        ("total", timing.total_ns),
+    ] {
+        println!(
+            "  {phase:<9}{:>8.1} {:>8.1} {:>8.1} {:>8.1}",
+            us(q[0]),
+            us(q[1]),
+            us(q[2]),
+            us(q[3])
+        );
+    }
+    println!(
+        "  max QP iterations {}, statuses {}, size_of::<Mpc>() = {} bytes",
+        timing.max_qp_iterations, timing.statuses, timing.size_of_mpc
+    );
+    let instructions = if options.instruction_steps > 0 {
+        eprintln!(
+            "counting instructions of {} steps under callgrind ...",
+            options.instruction_steps
+        );
+        let c = count_instructions(&binary, &options)?;
+        println!(
+            "  instructions per RTI step (callgrind, {} steps of the circle): median {}, max {}",
+            c.steps, c.median, c.max
+        );
+        Some(c)
+    } else {
+        None
+    };
+    let generic =
+        match (&model, options.generic_steps) {
+            (Some(m), n) if n > 0 => {
+                eprintln!("timing the generic reference solver ({n} steps per trajectory) ...");
+                let g = run_generic(m, &dims.options, dims.horizon, dims.dt, dims.substeps, n, options.seed);
+                println!(
+                "  generic (interpreted + clarabel): {} steps, total median {:.1} p99 {:.1} max {:.1} µs, {} failures",
+                g.steps, us(g.total_ns[0]), us(g.total_ns[1]), us(g.total_ns[2]), g.failures
+            );
+                Some(g)
+            }
+            _ => None,
+        };
+    if let Some(path) = &args.json {
+        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "generic": generic, "native": options.native });
+        let text = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())? + "\n";
+        std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
     Ok(())
 }

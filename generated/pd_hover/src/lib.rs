@@ -22,8 +22,8 @@ mod qp;
 mod mpc;
 pub use dims::*;
 pub use model::{continuous_dynamics, continuous_jacobians};
-pub use rk4::{discrete_dynamics, discrete_jacobians, discrete_linearization};
 pub use mpc::{Mpc, Solution, Status};
+pub use rk4::{discrete_dynamics, discrete_jacobians, discrete_linearization};
 /// State names, in state order.
 pub const STATE_NAMES: [&str; NX] = [
     "x",

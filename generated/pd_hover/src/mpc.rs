@@ -213,16 +213,15 @@ impl Mpc {
                 }
             }
             for r in 0..NU {
-                for c in 0..NU {
-                    let mut s = 0.0;
-                    for k in 0..NX {
-                        s += m[r][k] * bi[k][c];
+                let mut s = [0.0; NU];
+                for k in 0..NX {
+                    let mrk = m[r][k];
+                    for c in 0..NU {
+                        s[c] += mrk * bi[k][c];
                     }
-                    if r == c {
-                        s += R[r] + REGULARISATION;
-                    }
-                    self.h[i * NU + r][i * NU + c] = s;
                 }
+                s[r] += R[r] + REGULARISATION;
+                self.h[i * NU + r][i * NU..(i + 1) * NU].copy_from_slice(&s);
             }
             let mut e = m;
             for j in (0..i).rev() {
@@ -240,13 +239,16 @@ impl Mpc {
                 e = next;
                 let bj = &self.b[j];
                 for r in 0..NU {
-                    for c in 0..NU {
-                        let mut s = 0.0;
-                        for k in 0..NX {
-                            s += e[r][k] * bj[k][c];
+                    let mut s = [0.0; NU];
+                    for k in 0..NX {
+                        let erk = e[r][k];
+                        for c in 0..NU {
+                            s[c] += erk * bj[k][c];
                         }
-                        self.h[i * NU + r][j * NU + c] = s;
-                        self.h[j * NU + c][i * NU + r] = s;
+                    }
+                    self.h[i * NU + r][j * NU..(j + 1) * NU].copy_from_slice(&s);
+                    for c in 0..NU {
+                        self.h[j * NU + c][i * NU + r] = s[c];
                     }
                 }
             }

@@ -62,6 +62,27 @@ impl<const NV: usize> Default for BoxQp<NV> {
         Self::new()
     }
 }
+/// Σ aᵢ bᵢ over the shorter length, with 8 independent partial sums so that the
+/// loop vectorises (the summation order is fixed, so results are deterministic).
+#[inline]
+pub fn dot(a: &[Real], b: &[Real]) -> Real {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0 as Real; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let mut tail = 0.0;
+    for (x, y) in ra.iter().zip(rb) {
+        tail += x * y;
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
+        + tail
+}
 /// Relative pivot tolerance of the factorisation.
 const PIVOT_TOLERANCE: Real = 1e3 * Real::EPSILON;
 impl<const NV: usize> BoxQp<NV> {
@@ -111,11 +132,7 @@ impl<const NV: usize> BoxQp<NV> {
         for i in 0..nf {
             let hi = &h[self.free[i]];
             for j in 0..=i {
-                let (ri, rj) = (&self.l[i], &self.l[j]);
-                let mut s = hi[self.free[j]];
-                for k in 0..j {
-                    s -= ri[k] * rj[k];
-                }
+                let s = hi[self.free[j]] - dot(&self.l[i][..j], &self.l[j][..j]);
                 if j < i {
                     self.l[i][j] = s / self.l[j][j];
                 } else {
@@ -133,11 +150,7 @@ impl<const NV: usize> BoxQp<NV> {
         let nf = self.nf;
         for i in 0..nf {
             let row = &self.l[i];
-            let mut s = self.rhs[i];
-            for k in 0..i {
-                s -= row[k] * self.rhs[k];
-            }
-            self.rhs[i] = s / row[i];
+            self.rhs[i] = (self.rhs[i] - dot(&row[..i], &self.rhs[..i])) / row[i];
         }
         for i in (0..nf).rev() {
             let xi = self.rhs[i] / self.l[i][i];
@@ -158,16 +171,10 @@ impl<const NV: usize> BoxQp<NV> {
         let hv = &h[var];
         for i in 0..nf {
             let row = &self.l[i];
-            let mut s = hv[self.free[i]];
-            for k in 0..i {
-                s -= row[k] * self.target[k];
-            }
-            self.target[i] = s / row[i];
+            self.target[i] = (hv[self.free[i]] - dot(&row[..i], &self.target[..i]))
+                / row[i];
         }
-        let mut d = hv[var];
-        for k in 0..nf {
-            d -= self.target[k] * self.target[k];
-        }
+        let d = hv[var] - dot(&self.target[..nf], &self.target[..nf]);
         if !(d > PIVOT_TOLERANCE * hv[var].abs()) {
             return Err(QpStatus::NotPositiveDefinite);
         }
@@ -233,16 +240,12 @@ impl<const NV: usize> BoxQp<NV> {
         let mut iterations = 0;
         while iterations < max_iterations {
             iterations += 1;
+            for j in 0..NV {
+                self.target[j] = if self.state[j] == Bound::Free { 0.0 } else { v[j] };
+            }
             for i in 0..self.nf {
                 let var = self.free[i];
-                let row = &h[var];
-                let mut s = g[var];
-                for j in 0..NV {
-                    if self.state[j] != Bound::Free {
-                        s += row[j] * v[j];
-                    }
-                }
-                self.rhs[i] = -s;
+                self.rhs[i] = -(g[var] + dot(&h[var], &self.target));
             }
             self.solve_factored();
             let mut alpha: Real = 1.0;
@@ -282,12 +285,7 @@ impl<const NV: usize> BoxQp<NV> {
                     Bound::Lower => 1.0,
                     Bound::Upper => -1.0,
                 };
-                let row = &h[j];
-                let mut grad = g[j];
-                for k in 0..NV {
-                    grad += row[k] * v[k];
-                }
-                let mu = sign * grad;
+                let mu = sign * (g[j] + dot(&h[j], &v[..]));
                 if mu < worst {
                     worst = mu;
                     release = Some(j);

@@ -1,0 +1,72 @@
+//! Read the problem constants back from a generated crate's `src/dims.rs`
+//! (parsed with syn), so the generic solver solves the crate's exact problem.
+
+use crate::MpcOptions;
+use std::collections::HashMap;
+use std::path::Path;
+use syn::{Expr, Item, Lit, UnOp};
+
+/// Sizes and options of a generated crate.
+#[derive(Debug, Clone)]
+pub struct CrateDims {
+    pub horizon: usize,
+    pub dt: f64,
+    pub substeps: usize,
+    pub options: MpcOptions,
+}
+
+fn number(e: &Expr) -> Option<f64> {
+    match e {
+        Expr::Lit(l) => match &l.lit {
+            Lit::Float(f) => f.base10_parse().ok(),
+            Lit::Int(i) => i.base10_parse::<f64>().ok(),
+            _ => None,
+        },
+        Expr::Unary(u) if matches!(u.op, UnOp::Neg(_)) => number(&u.expr).map(|v| -v),
+        Expr::Paren(p) => number(&p.expr),
+        _ => None,
+    }
+}
+
+fn values(e: &Expr) -> Option<Vec<f64>> {
+    match e {
+        Expr::Array(a) => a.elems.iter().map(number).collect(),
+        _ => number(e).map(|v| vec![v]),
+    }
+}
+
+/// Parse `crate_dir/src/dims.rs`.
+pub fn read(crate_dir: &Path) -> Result<CrateDims, String> {
+    let path = crate_dir.join("src/dims.rs");
+    let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+    let file: syn::File = syn::parse_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut consts: HashMap<String, Vec<f64>> = HashMap::new();
+    for item in &file.items {
+        if let Item::Const(c) = item {
+            if let Some(v) = values(&c.expr) {
+                consts.insert(c.ident.to_string(), v);
+            }
+        }
+    }
+    let get = |name: &str| {
+        consts
+            .get(name)
+            .cloned()
+            .ok_or_else(|| format!("{}: no constant {name}", path.display()))
+    };
+    let scalar = |name: &str| get(name).map(|v| v[0]);
+    Ok(CrateDims {
+        horizon: scalar("N")? as usize,
+        dt: scalar("DT")?,
+        substeps: scalar("SUBSTEPS")? as usize,
+        options: MpcOptions {
+            q: get("Q")?,
+            q_terminal: get("Q_TERMINAL")?,
+            r: get("R")?,
+            u_min: get("U_MIN")?,
+            u_max: get("U_MAX")?,
+            max_qp_iterations: scalar("MAX_QP_ITERATIONS")? as usize,
+            regularisation: scalar("REGULARISATION")?,
+        },
+    })
+}
