@@ -134,12 +134,7 @@ pub fn count_instructions(binary: &Path, options: &BenchOptions) -> Result<Instr
         let text = std::fs::read_to_string(&path).map_err(|e| e.to_string())?;
         // Each dump after a call holds that call's cost in its "summary:" line.
         if let Some(n) = text.lines().find_map(|l| l.strip_prefix("summary: ")) {
-            let n: u64 = n
-                .trim()
-                .split_whitespace()
-                .next()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(0);
+            let n: u64 = n.split_whitespace().next().and_then(|v| v.parse().ok()).unwrap_or(0);
             if n > 0 {
                 counts.push(n);
             }
