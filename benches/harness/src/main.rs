@@ -7,6 +7,10 @@
 //! the last CPU core when possible); `harness --callgrind N` runs N steps
 //! through `measured_step` for instruction counting under callgrind.
 
+// `Real` may be f32 or f64, so `as f64` casts are needed in general; `is_multiple_of`
+// is newer than the workspace's minimum Rust.
+#![allow(clippy::unnecessary_cast, clippy::manual_is_multiple_of)]
+
 mod scenario {
     include!("../../scenario.rs");
 }
