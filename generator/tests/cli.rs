@@ -378,3 +378,88 @@ fn awkward_variable_names_generate_a_working_crate() {
         stderr(&o)
     );
 }
+
+/// `--mpc` options reach the generated solver: with a QP iteration cap of 1 a
+/// cold solve towards a far reference stops at the cap, and the input it
+/// returns is still finite and within the (custom) bounds.
+#[test]
+fn mpc_options_and_the_iteration_cap() {
+    let tmp = tempfile::tempdir().unwrap();
+    let options = tmp.path().join("options.json");
+    fs::write(
+        &options,
+        r#"{"max_qp_iterations": 1, "u_max": [4, 0.5, 0.5, 2], "u_min": [-4, -0.5, -0.5, -2]}"#,
+    )
+    .unwrap();
+    let out = tmp.path().join("capped");
+    let o = uavgen(&[
+        "--model",
+        &model("sindy_m100.json"),
+        "--mpc",
+        options.to_str().unwrap(),
+        "--crate-name",
+        "capped",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lib = fs::read_to_string(out.join("src/lib.rs")).unwrap();
+    assert!(
+        lib.contains("max_qp_iterations=1"),
+        "the header records the MPC options"
+    );
+    let test = r#"
+use capped::*;
+#[test]
+fn cap_is_reported_and_the_input_is_safe() {
+    let mut mpc = Mpc::new();
+    let x0 = [0.0; NX];
+    let mut reference = [[0.0; NX]; N + 1];
+    for r in reference.iter_mut() { r[0] = 50.0; r[1] = -40.0; r[2] = 30.0; }
+    let s = mpc.solve(&x0, &reference);
+    assert_eq!(s.status, Status::IterationCap);
+    assert_eq!(s.qp_iterations, 1);
+    assert_eq!(MAX_QP_ITERATIONS, 1);
+    assert_eq!(U_MAX, [4.0, 0.5, 0.5, 2.0]);
+    for i in 0..NU {
+        assert!(s.u0[i].is_finite() && s.u0[i] >= U_MIN[i] && s.u0[i] <= U_MAX[i]);
+    }
+    for u in mpc.planned_inputs() {
+        for i in 0..NU { assert!(u[i] >= U_MIN[i] && u[i] <= U_MAX[i]); }
+    }
+}
+"#;
+    fs::create_dir_all(out.join("tests")).unwrap();
+    fs::write(out.join("tests/cap.rs"), test).unwrap();
+    let target = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("capped-target");
+    let o = Command::new(env!("CARGO"))
+        .args(["test", "--quiet", "--offline", "--target-dir", target.to_str().unwrap()])
+        .current_dir(&out)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        stderr(&o)
+    );
+
+    // Bad options are named and nothing is written.
+    fs::write(&options, r#"{"u_min": [1, 0, 0, 0], "u_max": [0, 1, 1, 1]}"#).unwrap();
+    let out2 = tmp.path().join("never");
+    let o = uavgen(&[
+        "--model",
+        &model("sindy_m100.json"),
+        "--mpc",
+        options.to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("u_min[0] = 1 must be below u_max[0] = 0"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out2.exists());
+}

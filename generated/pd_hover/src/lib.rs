@@ -15,11 +15,11 @@ mod math;
 #[rustfmt::skip]
 mod model;
 #[rustfmt::skip]
-mod rk4;
+mod mpc;
 #[rustfmt::skip]
 mod qp;
 #[rustfmt::skip]
-mod mpc;
+mod rk4;
 pub use dims::*;
 pub use model::{continuous_dynamics, continuous_jacobians};
 pub use mpc::{Mpc, Solution, Status};

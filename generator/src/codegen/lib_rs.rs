@@ -67,16 +67,16 @@ pub fn emit(model: &Model, ir: &ModelIr) -> TokenStream {
         #[rustfmt::skip]
         mod model;
         #[rustfmt::skip]
-        mod rk4;
+        mod mpc;
         #[rustfmt::skip]
         mod qp;
         #[rustfmt::skip]
-        mod mpc;
+        mod rk4;
 
         pub use dims::*;
         pub use model::{continuous_dynamics, continuous_jacobians};
-        pub use rk4::{discrete_dynamics, discrete_jacobians, discrete_linearization};
         pub use mpc::{Mpc, Solution, Status};
+        pub use rk4::{discrete_dynamics, discrete_jacobians, discrete_linearization};
 
         /// State names, in state order.
         pub const STATE_NAMES: [&str; NX] = [#(#states),*];
