@@ -83,6 +83,34 @@ pub fn dot(a: &[Real], b: &[Real]) -> Real {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
         + tail
 }
+/// Four dot products of `a` with `b[0..4]` (all over a's length), sharing the
+/// loads of `a`; 4 lanes per product so the loop vectorises.
+#[inline]
+fn dot4(a: &[Real], b: [&[Real]; 4]) -> [Real; 4] {
+    let n = a.len();
+    let b = [&b[0][..n], &b[1][..n], &b[2][..n], &b[3][..n]];
+    let mut acc = [[0.0 as Real; 4]; 4];
+    let chunks = n / 4;
+    for q in 0..chunks {
+        let k = 4 * q;
+        let x = [a[k], a[k + 1], a[k + 2], a[k + 3]];
+        for c in 0..4 {
+            let y = &b[c][k..k + 4];
+            for l in 0..4 {
+                acc[c][l] += x[l] * y[l];
+            }
+        }
+    }
+    let mut out = [0.0 as Real; 4];
+    for c in 0..4 {
+        let mut t = (acc[c][0] + acc[c][2]) + (acc[c][1] + acc[c][3]);
+        for k in 4 * chunks..n {
+            t += a[k] * b[c][k];
+        }
+        out[c] = t;
+    }
+    out
+}
 /// ½ vᵀ H v + gᵀ v
 fn objective<const NV: usize>(
     h: &[[Real; NV]; NV],
@@ -144,10 +172,33 @@ impl<const NV: usize> BoxQp<NV> {
                 self.nf += 1;
             }
         }
-        let nf = self.nf;
+        let nf = self.nf.min(NV);
         for i in 0..nf {
             let hi = &h[self.free[i]];
-            for j in 0..=i {
+            let mut j = 0;
+            while j + 4 <= i {
+                let (head, tail) = self.l.split_at_mut(i);
+                let li = &mut tail[0];
+                let d = dot4(
+                    &li[..j],
+                    [
+                        &head[j][..j],
+                        &head[j + 1][..j],
+                        &head[j + 2][..j],
+                        &head[j + 3][..j],
+                    ],
+                );
+                for c in 0..4 {
+                    let lj = &head[j + c];
+                    let mut s = hi[self.free[j + c]] - d[c];
+                    for k in j..j + c {
+                        s -= li[k] * lj[k];
+                    }
+                    li[j + c] = s / lj[j + c];
+                }
+                j += 4;
+            }
+            for j in j..=i {
                 let s = hi[self.free[j]] - dot(&self.l[i][..j], &self.l[j][..j]);
                 if j < i {
                     self.l[i][j] = s / self.l[j][j];
