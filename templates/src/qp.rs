@@ -187,7 +187,10 @@ impl<const NV: usize> BoxQp<NV> {
             while j + 4 <= i {
                 let (head, tail) = self.l.split_at_mut(i);
                 let li = &mut tail[0];
-                let d = dot4(&li[..j], [&head[j][..j], &head[j + 1][..j], &head[j + 2][..j], &head[j + 3][..j]]);
+                let d = dot4(
+                    &li[..j],
+                    [&head[j][..j], &head[j + 1][..j], &head[j + 2][..j], &head[j + 3][..j]],
+                );
                 for c in 0..4 {
                     let lj = &head[j + c];
                     let mut s = hi[self.free[j + c]] - d[c];
