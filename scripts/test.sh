@@ -30,6 +30,18 @@ cargo build --release -q --target thumbv7em-none-eabihf \
 
 echo "== firmware example links a generated solver (thumbv7em-none-eabihf, panic = abort)"
 (cd runtime/firmware-example && cargo build --release -q)
+if command -v llvm-nm >/dev/null; then
+    for bin in sindy_m100 pd_hover_f32; do
+        elf=runtime/firmware-example/target/thumbv7em-none-eabihf/release/$bin
+        if llvm-nm "$elf" | grep -qi panic; then
+            echo "$bin: a panic path is linked into the firmware (see llvm-objdump -d)" >&2
+            exit 1
+        fi
+    done
+    echo "no panic path linked into the firmware binaries"
+else
+    echo "llvm-nm not found: skipping the no-panic check of the firmware binaries"
+fi
 
 echo "== tests"
 log=$(mktemp)

@@ -87,25 +87,21 @@ pub fn dot(a: &[Real], b: &[Real]) -> Real {
 /// loads of `a`; 4 lanes per product so the loop vectorises.
 #[inline]
 fn dot4(a: &[Real], b: [&[Real]; 4]) -> [Real; 4] {
-    let n = a.len();
-    let b = [&b[0][..n], &b[1][..n], &b[2][..n], &b[3][..n]];
     let mut acc = [[0.0 as Real; 4]; 4];
-    let chunks = n / 4;
-    for q in 0..chunks {
-        let k = 4 * q;
-        let x = [a[k], a[k + 1], a[k + 2], a[k + 3]];
-        for c in 0..4 {
-            let y = &b[c][k..k + 4];
+    let mut out = [0.0 as Real; 4];
+    let chunks_a = a.chunks_exact(4);
+    let tail_a = chunks_a.remainder();
+    for (c, bc) in b.iter().enumerate() {
+        let chunks_b = bc.chunks_exact(4);
+        let tail_b = chunks_b.remainder();
+        for (x, y) in a.chunks_exact(4).zip(chunks_b) {
             for l in 0..4 {
                 acc[c][l] += x[l] * y[l];
             }
         }
-    }
-    let mut out = [0.0 as Real; 4];
-    for c in 0..4 {
         let mut t = (acc[c][0] + acc[c][2]) + (acc[c][1] + acc[c][3]);
-        for k in 4 * chunks..n {
-            t += a[k] * b[c][k];
+        for (x, y) in tail_a.iter().zip(tail_b) {
+            t += x * y;
         }
         out[c] = t;
     }
@@ -141,6 +137,17 @@ impl<const NV: usize> BoxQp<NV> {
             target: [0.0; NV],
         }
     }
+    /// Free variable number `i` (factor order), clamped so that indexing with
+    /// it needs no bounds check (it is always < NV by construction).
+    #[inline]
+    fn var(&self, i: usize) -> usize {
+        self.free[i % NV].min(NV - 1)
+    }
+    /// Number of free variables, ≤ NV.
+    #[inline]
+    fn free_count(&self) -> usize {
+        self.nf.min(NV)
+    }
     /// The working set (read access).
     #[allow(dead_code)]
     pub fn working_set(&self) -> &[Bound; NV] {
@@ -168,29 +175,28 @@ impl<const NV: usize> BoxQp<NV> {
         self.nf = 0;
         for i in 0..NV {
             if self.state[i] == Bound::Free {
-                self.free[self.nf] = i;
+                self.free[self.nf % NV] = i;
                 self.nf += 1;
             }
         }
         let nf = self.nf.min(NV);
+        let free = self.free;
+        let var = |i: usize| free[i % NV].min(NV - 1);
         for i in 0..nf {
-            let hi = &h[self.free[i]];
+            let hi = &h[var(i)];
             let mut j = 0;
             while j + 4 <= i {
                 let (head, tail) = self.l.split_at_mut(i);
-                let li = &mut tail[0];
+                let (Some(li), Some(rows)) = (tail.first_mut(), head.get(j..j + 4)) else {
+                    break;
+                };
                 let d = dot4(
                     &li[..j],
-                    [
-                        &head[j][..j],
-                        &head[j + 1][..j],
-                        &head[j + 2][..j],
-                        &head[j + 3][..j],
-                    ],
+                    [&rows[0][..j], &rows[1][..j], &rows[2][..j], &rows[3][..j]],
                 );
                 for c in 0..4 {
-                    let lj = &head[j + c];
-                    let mut s = hi[self.free[j + c]] - d[c];
+                    let lj = &rows[c];
+                    let mut s = hi[var(j + c)] - d[c];
                     for k in j..j + c {
                         s -= li[k] * lj[k];
                     }
@@ -199,11 +205,11 @@ impl<const NV: usize> BoxQp<NV> {
                 j += 4;
             }
             for j in j..=i {
-                let s = hi[self.free[j]] - dot(&self.l[i][..j], &self.l[j][..j]);
+                let s = hi[var(j)] - dot(&self.l[i][..j], &self.l[j][..j]);
                 if j < i {
                     self.l[i][j] = s / self.l[j][j];
                 } else {
-                    if !(s > PIVOT_TOLERANCE * hi[self.free[i]].abs()) {
+                    if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
                         return Err(QpStatus::NotPositiveDefinite);
                     }
                     self.l[i][i] = sqrt(s);
@@ -214,7 +220,7 @@ impl<const NV: usize> BoxQp<NV> {
     }
     /// Solve L Lᵀ y = b in place on `rhs[..nf]` (forward then backward substitution).
     fn solve_factored(&mut self) {
-        let nf = self.nf;
+        let nf = self.free_count();
         for i in 0..nf {
             let row = &self.l[i];
             self.rhs[i] = (self.rhs[i] - dot(&row[..i], &self.rhs[..i])) / row[i];
@@ -231,14 +237,14 @@ impl<const NV: usize> BoxQp<NV> {
     /// Append variable `var` as the last free variable: with c = H_{F,var},
     /// L l = c, d = √(H_var,var − lᵀl).
     fn append(&mut self, h: &[[Real; NV]; NV], var: usize) -> Result<(), QpStatus> {
-        let nf = self.nf;
+        let nf = self.free_count();
         if nf >= NV {
             return Err(QpStatus::NotPositiveDefinite);
         }
         let hv = &h[var];
         for i in 0..nf {
             let row = &self.l[i];
-            self.target[i] = (hv[self.free[i]] - dot(&row[..i], &self.target[..i]))
+            self.target[i] = (hv[self.var(i)] - dot(&row[..i], &self.target[..i]))
                 / row[i];
         }
         let d = hv[var] - dot(&self.target[..nf], &self.target[..nf]);
@@ -247,7 +253,7 @@ impl<const NV: usize> BoxQp<NV> {
         }
         self.l[nf][..nf].copy_from_slice(&self.target[..nf]);
         self.l[nf][nf] = sqrt(d);
-        self.free[nf] = var;
+        self.free[nf % NV] = var;
         self.nf += 1;
         Ok(())
     }
@@ -255,21 +261,27 @@ impl<const NV: usize> BoxQp<NV> {
     /// the factor of H_FF without p is [L11 0; L31 L33'] with L33' L33'ᵀ = L33 L33ᵀ + l32 l32ᵀ
     /// (a rank-one update by rotations).
     fn remove(&mut self, p: usize) {
-        let nf = self.nf;
+        let nf = self.free_count();
+        if p >= nf {
+            return;
+        }
         for i in p + 1..nf {
             self.target[i - 1] = self.l[i][p];
             for k in 0..p {
                 self.l[i - 1][k] = self.l[i][k];
             }
-            for k in p + 1..=i {
+            for k in p + 1..NV {
+                if k > i {
+                    break;
+                }
                 self.l[i - 1][k - 1] = self.l[i][k];
             }
         }
         for i in p..nf - 1 {
-            self.free[i] = self.free[i + 1];
+            self.free[i % NV] = self.free[(i + 1) % NV];
         }
         self.nf -= 1;
-        let nf = self.nf;
+        let nf = self.free_count();
         for k in p..nf {
             let lkk = self.l[k][k];
             let xk = self.target[k];
@@ -294,9 +306,9 @@ impl<const NV: usize> BoxQp<NV> {
         hi: &[Real; NV],
         v: &mut [Real; NV],
     ) -> bool {
-        let violations = (0..self.nf)
+        let violations = (0..self.free_count())
             .filter(|&i| {
-                let var = self.free[i];
+                let var = self.var(i);
                 self.rhs[i] < lo[var] || self.rhs[i] > hi[var]
             })
             .count();
@@ -304,15 +316,15 @@ impl<const NV: usize> BoxQp<NV> {
             return false;
         }
         let mut projected = *v;
-        for i in 0..self.nf {
-            let var = self.free[i];
+        for i in 0..self.free_count() {
+            let var = self.var(i);
             projected[var] = self.rhs[i].max(lo[var]).min(hi[var]);
         }
         if objective(h, g, &projected) > objective(h, g, v) {
             return false;
         }
-        for i in 0..self.nf {
-            let var = self.free[i];
+        for i in 0..self.free_count() {
+            let var = self.var(i);
             if self.rhs[i] < lo[var] {
                 self.state[var] = Bound::Lower;
             } else if self.rhs[i] > hi[var] {
@@ -350,8 +362,8 @@ impl<const NV: usize> BoxQp<NV> {
             for j in 0..NV {
                 self.target[j] = if self.state[j] == Bound::Free { 0.0 } else { v[j] };
             }
-            for i in 0..self.nf {
-                let var = self.free[i];
+            for i in 0..self.free_count() {
+                let var = self.var(i);
                 self.rhs[i] = -(g[var] + dot(&h[var], &self.target));
             }
             self.solve_factored();
@@ -367,8 +379,8 @@ impl<const NV: usize> BoxQp<NV> {
             }
             let mut alpha: Real = 1.0;
             let mut blocking = None;
-            for i in 0..self.nf {
-                let var = self.free[i];
+            for i in 0..self.free_count() {
+                let var = self.var(i);
                 let d = self.rhs[i] - v[var];
                 let (limit, bound) = if d < 0.0 {
                     (lo[var], Bound::Lower)
@@ -383,12 +395,12 @@ impl<const NV: usize> BoxQp<NV> {
                     }
                 }
             }
-            for i in 0..self.nf {
-                let var = self.free[i];
+            for i in 0..self.free_count() {
+                let var = self.var(i);
                 v[var] += alpha * (self.rhs[i] - v[var]);
             }
             if let Some((p, bound)) = blocking {
-                let var = self.free[p];
+                let var = self.var(p);
                 v[var] = if bound == Bound::Lower { lo[var] } else { hi[var] };
                 self.state[var] = bound;
                 self.remove(p);
