@@ -39,6 +39,25 @@ fn files_of(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     out
 }
 
+/// Add `tests/<name>.rs` with `source` to the generated crate in `dir` and run
+/// `cargo test` there (offline: the workspace build has fetched its only dependency).
+fn cargo_test_in(dir: &Path, name: &str, source: &str) {
+    fs::create_dir_all(dir.join("tests")).unwrap();
+    fs::write(dir.join(format!("tests/{name}.rs")), source).unwrap();
+    let target = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("{name}-target"));
+    let o = Command::new(env!("CARGO"))
+        .args(["test", "--quiet", "--offline", "--target-dir", target.to_str().unwrap()])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "generated crate failed to build or test:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        stderr(&o)
+    );
+}
+
 fn model(name: &str) -> String {
     repo().join("models").join(name).display().to_string()
 }
@@ -363,20 +382,7 @@ fn awkward_variable_names_generate_a_working_crate() {
     let test = format!(
         "#[test]\nfn matches_interpreter() {{\n    let x = {x:?};\n    let u = {u:?};\n    let f = awkward_model::continuous_dynamics(&x, &u);\n    let step = awkward_model::discrete_dynamics(&x, &u);\n    let (ef, es) = ({f:?}, {step:?});\n    for i in 0..6 {{\n        assert!((f[i] - ef[i]).abs() <= 1e-12 * ef[i].abs().max(1.0), \"f[{{i}}]\");\n        assert!((step[i] - es[i]).abs() <= 1e-12 * es[i].abs().max(1.0), \"step[{{i}}]\");\n    }}\n}}\n"
     );
-    fs::create_dir_all(out.join("tests")).unwrap();
-    fs::write(out.join("tests/matches.rs"), test).unwrap();
-    let target = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("awkward-target");
-    let o = Command::new(env!("CARGO"))
-        .args(["test", "--quiet", "--offline", "--target-dir", target.to_str().unwrap()])
-        .current_dir(&out)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "generated crate failed to build or test:\n{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        stderr(&o)
-    );
+    cargo_test_in(&out, "matches", &test);
 }
 
 /// `--mpc` options reach the generated solver: with a QP iteration cap of 1 a
@@ -429,20 +435,7 @@ fn cap_is_reported_and_the_input_is_safe() {
     }
 }
 "#;
-    fs::create_dir_all(out.join("tests")).unwrap();
-    fs::write(out.join("tests/cap.rs"), test).unwrap();
-    let target = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("capped-target");
-    let o = Command::new(env!("CARGO"))
-        .args(["test", "--quiet", "--offline", "--target-dir", target.to_str().unwrap()])
-        .current_dir(&out)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        stderr(&o)
-    );
+    cargo_test_in(&out, "cap", test);
 
     // Bad options are named and nothing is written.
     fs::write(&options, r#"{"u_min": [1, 0, 0, 0], "u_max": [0, 1, 1, 1]}"#).unwrap();
