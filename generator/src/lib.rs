@@ -8,7 +8,10 @@
 pub mod bench;
 pub mod codegen;
 pub mod discretize;
+pub mod identify;
 pub mod ir;
+pub mod logs;
+pub mod metrics;
 pub mod model;
 pub mod mpc_options;
 pub mod reference;

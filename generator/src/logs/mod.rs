@@ -1,0 +1,180 @@
+//! Flight logs in the `LOG_FORMAT.md` CSV contract (version 1): reading, validation, segments,
+//! yaw unwrapping and a data-quality report.
+//!
+//! [`read_log`] / [`parse_log`] turn a log into a [`FlightLog`]: the `# key: value` metadata, the
+//! data split into [`Segment`]s (a change of the `segment` column or a time gap of more than
+//! [`GAP_PERIODS`] nominal periods starts a new one), yaw unwrapped within each segment, and a
+//! [`QualityReport`] (sampling period and its uniformity, the metadata rate against the measured
+//! one, stale sample-and-hold rows). Invalid input is a [`LogError`] naming the file, the line and
+//! the column; no input makes the reader panic. See `docs/logs.md`.
+
+mod error;
+mod parse;
+mod quality;
+mod segments;
+
+pub use error::{LogError, LogErrorKind};
+pub use quality::{QualityReport, SegmentQuality, IRREGULAR_FRACTION, RATE_MISMATCH_FRACTION};
+pub use segments::{median, unwrap_angle, SegmentStart, GAP_PERIODS};
+
+use std::path::Path;
+
+/// The state columns in the order of [`Segment::x`].
+pub const STATE_COLUMNS: [&str; 12] = [
+    "x",
+    "y",
+    "z",
+    "roll",
+    "pitch",
+    "yaw",
+    "vx",
+    "vy",
+    "vz",
+    "roll_rate",
+    "pitch_rate",
+    "yaw_rate",
+];
+
+/// The input columns in the order of [`Segment::u`].
+pub const INPUT_COLUMNS: [&str; 4] = ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"];
+
+/// Index of yaw in the state vector.
+pub const YAW: usize = 5;
+
+/// A validated flight log.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlightLog {
+    /// The file (or label) the log was read from.
+    pub source: String,
+    /// The `# key: value` lines before the header, in file order.
+    pub metadata: Vec<(String, String)>,
+    /// The data, one segment per continuous flight (at least one).
+    pub segments: Vec<Segment>,
+    pub report: QualityReport,
+}
+
+impl FlightLog {
+    /// The value of the first metadata line with this key.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.metadata.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+    }
+
+    /// Data rows over all segments.
+    pub fn rows(&self) -> usize {
+        self.segments.iter().map(Segment::len).sum()
+    }
+}
+
+/// A continuous stretch of data: time increases, no gap.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Segment {
+    /// Index in [`FlightLog::segments`].
+    pub index: usize,
+    /// Time in s, strictly increasing.
+    pub t: Vec<f64>,
+    /// States `[x y z roll pitch yaw vx vy vz roll_rate pitch_rate yaw_rate]` ([`STATE_COLUMNS`]);
+    /// yaw is unwrapped (continuous).
+    pub x: Vec<[f64; 12]>,
+    /// Inputs `[u_vz u_roll u_pitch u_yaw_rate]` ([`INPUT_COLUMNS`]).
+    pub u: Vec<[f64; 4]>,
+    /// Present if the log has a `battery_voltage` column.
+    pub battery_voltage: Option<Vec<f64>>,
+    /// The line (1-based, as in an editor) of the segment's first data row.
+    pub first_line: usize,
+}
+
+impl Segment {
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Last minus first time stamp.
+    pub fn duration(&self) -> f64 {
+        match (self.t.first(), self.t.last()) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        }
+    }
+}
+
+/// Read and validate a flight log; errors name the file as `path` displays.
+pub fn read_log(path: &Path) -> Result<FlightLog, LogError> {
+    let label = path.display().to_string();
+    let bytes = std::fs::read(path)
+        .map_err(|e| LogError::new(&label, None, None, LogErrorKind::Io, format!("cannot read: {e}")))?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let bad = e.utf8_error().valid_up_to();
+        let bytes = e.as_bytes();
+        let line = bytes[..bad.min(bytes.len())].iter().filter(|&&b| b == b'\n').count() + 1;
+        LogError::new(
+            &label,
+            Some(line),
+            None,
+            LogErrorKind::Encoding,
+            format!("not UTF-8 text (invalid byte at offset {bad})"),
+        )
+    })?;
+    parse_log(&text, &label)
+}
+
+/// Validate log text; `label` names the file in errors and in [`FlightLog::source`].
+pub fn parse_log(text: &str, label: &str) -> Result<FlightLog, LogError> {
+    let table = parse::parse(text, label)?;
+    let measured = segments::measured_period(&table.rows);
+    // The nominal period: the metadata rate if given (a contradicting time column shows in the
+    // report's warnings), else the median step.
+    let nominal = match table.rate_hz {
+        Some((hz, _)) => Some(1.0 / hz),
+        None => measured,
+    };
+
+    let rows = &table.rows;
+    let mut segments = Vec::new();
+    let mut qualities = Vec::new();
+    for (index, (range, start)) in segments::split(rows, nominal).into_iter().enumerate() {
+        let part = &rows[range];
+        let (Some(first), Some(last)) = (part.first(), part.last()) else {
+            continue;
+        };
+        let mut x: Vec<[f64; 12]> = part.iter().map(|r| r.x).collect();
+        let mut yaw: Vec<f64> = x.iter().map(|s| s[YAW]).collect();
+        let yaw_wraps = unwrap_angle(&mut yaw);
+        for (s, y) in x.iter_mut().zip(yaw) {
+            s[YAW] = y;
+        }
+        let segment = Segment {
+            index,
+            t: part.iter().map(|r| r.t).collect(),
+            x,
+            u: part.iter().map(|r| r.u).collect(),
+            battery_voltage: if table.has_battery {
+                Some(part.iter().filter_map(|r| r.battery).collect())
+            } else {
+                None
+            },
+            first_line: first.line,
+        };
+        let mut q = quality::segment_quality(&segment, last.line, start, first.segment, nominal);
+        q.yaw_wraps = yaw_wraps;
+        segments.push(segment);
+        qualities.push(q);
+    }
+    let report = QualityReport {
+        source: label.to_owned(),
+        rows: rows.len(),
+        metadata_rate_hz: table.rate_hz.map(|(hz, _)| hz),
+        measured_period: measured,
+        nominal_period: nominal,
+        segments: qualities,
+    };
+    Ok(FlightLog {
+        source: label.to_owned(),
+        metadata: table.metadata,
+        segments,
+        report,
+    })
+}
