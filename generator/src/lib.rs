@@ -8,6 +8,7 @@
 pub mod bench;
 pub mod codegen;
 pub mod discretize;
+pub mod evaluate;
 pub mod identify;
 pub mod ir;
 pub mod logs;

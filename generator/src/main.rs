@@ -1,5 +1,7 @@
 //! The `uavgen` command line.
 
+mod cli;
+
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -29,6 +31,10 @@ enum Command {
     Check(CheckArgs),
     /// Worst-case benchmark of a generated crate (see docs/benchmarks.md).
     Bench(BenchArgs),
+    /// Identify a SINDy or PD model from flight logs (docs/identification.md).
+    Identify(cli::identify::IdentifyArgs),
+    /// Evaluate a model's predictions against flight logs: one-step, horizon and whole-flight metrics.
+    Evaluate(cli::evaluate::EvaluateArgs),
 }
 
 #[derive(Args)]
@@ -138,6 +144,8 @@ fn main() -> ExitCode {
         Some(Command::ImportPysindy(args)) => import_pysindy(args),
         Some(Command::Check(args)) => check(args),
         Some(Command::Bench(args)) => bench(args),
+        Some(Command::Identify(args)) => cli::identify::run(args),
+        Some(Command::Evaluate(args)) => cli::evaluate::run(args),
         None => generate(cli.generate),
     };
     match result {

@@ -1,2 +1,4 @@
 pub mod dataset;
+pub mod pd;
 pub mod preprocess;
+pub mod sindy;

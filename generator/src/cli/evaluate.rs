@@ -1,0 +1,55 @@
+//! `uavgen evaluate`: a model's predictions against flight logs (docs/evaluate.md).
+
+use clap::Args;
+use std::path::PathBuf;
+use uavgen::evaluate::{evaluate, plot_states, EvaluateOptions};
+
+#[derive(Args)]
+pub struct EvaluateArgs {
+    /// Model file (uavgen-model/1).
+    #[arg(long)]
+    model: PathBuf,
+    /// Flight log to evaluate on; repeat for several.
+    #[arg(long = "log", required = true)]
+    logs: Vec<PathBuf>,
+    /// Free-run horizon in samples (the MPC's).
+    #[arg(long, default_value_t = 30)]
+    horizon: usize,
+    /// RK4 substeps per sample (default: the automatic rule).
+    #[arg(long)]
+    substeps: Option<usize>,
+    /// Also write the full evaluation as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write measured-vs-predicted plots (SVG) into this directory.
+    #[arg(long)]
+    plots: Option<PathBuf>,
+}
+
+pub fn run(args: EvaluateArgs) -> Result<(), String> {
+    let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
+    let mut logs = Vec::new();
+    for path in &args.logs {
+        logs.push(uavgen::logs::read_log(path).map_err(|e| e.to_string())?);
+    }
+    let options = EvaluateOptions {
+        horizon: args.horizon,
+        substeps: args.substeps,
+        ..EvaluateOptions::default()
+    };
+    let evaluation = evaluate(&model, &logs, &options).map_err(|e| e.to_string())?;
+    println!("{evaluation}");
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&evaluation).map_err(|e| e.to_string())? + "\n";
+        super::write_atomically(path, &text)?;
+    }
+    if let Some(dir) = &args.plots {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        for log in &logs {
+            for file in plot_states(&model, log, &options, dir).map_err(|e| e.to_string())? {
+                eprintln!("wrote {}", file.display());
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,212 @@
+//! `uavgen identify`: flight logs → a `uavgen-model/1` file (SINDy or PD).
+
+use clap::{Args, ValueEnum};
+use std::path::PathBuf;
+use uavgen::identify::dataset::{build, DatasetOptions};
+use uavgen::identify::pd::{self, PdFitOptions};
+use uavgen::identify::preprocess::{LowPass, SavGol};
+use uavgen::identify::sindy::{
+    self, AicSelection, Criterion, FittedRows, LibraryKind, Optimizer, Regularizer, SindyOptions,
+};
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Method {
+    /// Sparse regression on a candidate library (docs/sindy.md).
+    Sindy,
+    /// The paper's 16-parameter PD/Euler-Lagrange model (docs/pd-fit.md).
+    Pd,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum LibraryArg {
+    /// The paper's Θ = [1, x, u, x², x·u, sin Ω, cos Ω, x sin Ω, x cos Ω] (155 terms).
+    Paper,
+    /// Kinematic rows exact, no raw position or yaw (translation and heading invariance).
+    Physics,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum OptimizerArg {
+    Stlsq,
+    Sr3L0,
+    Sr3L1,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum CriterionArg {
+    Aic,
+    Bic,
+}
+
+#[derive(Args)]
+pub struct IdentifyArgs {
+    /// Identification method.
+    #[arg(long, value_enum)]
+    method: Method,
+    /// Flight log (LOG_FORMAT.md CSV); repeat for several.
+    #[arg(long = "log", required = true)]
+    logs: Vec<PathBuf>,
+    /// Output model file.
+    #[arg(long)]
+    out: PathBuf,
+    /// Model name (default: the output file's stem).
+    #[arg(long)]
+    name: Option<String>,
+    /// Overwrite --out if it exists.
+    #[arg(long)]
+    force: bool,
+    /// Savitzky-Golay window (odd) for derivatives.
+    #[arg(long, default_value_t = 9)]
+    savgol_window: usize,
+    /// Savitzky-Golay polynomial order.
+    #[arg(long, default_value_t = 3)]
+    savgol_order: usize,
+    /// SINDy: candidate library.
+    #[arg(long, value_enum, default_value_t = LibraryArg::Physics)]
+    library: LibraryArg,
+    /// SINDy: fit all 12 rows (the paper) instead of the 6 dynamic rows with exact kinematics.
+    #[arg(long)]
+    all_rows: bool,
+    /// SINDy: optimiser.
+    #[arg(long, value_enum, default_value_t = OptimizerArg::Stlsq)]
+    optimizer: OptimizerArg,
+    /// SINDy: sparsity parameter (STLSQ threshold on normalised coefficients, SR3 λ).
+    #[arg(long, default_value_t = 0.05)]
+    threshold: f64,
+    /// SINDy: sweep the sparsity parameter and select by an information criterion.
+    #[arg(long)]
+    sweep: bool,
+    /// SINDy: criterion of the sweep.
+    #[arg(long, value_enum, default_value_t = CriterionArg::Aic)]
+    criterion: CriterionArg,
+    /// PD: mass in kg.
+    #[arg(long, default_value_t = 2.4)]
+    mass: f64,
+    /// PD: the paper's first-order low-pass λ/(s+λ) with this λ in rad/s (the paper: 1).
+    #[arg(long)]
+    lowpass: Option<f64>,
+}
+
+fn check_positive(name: &str, v: f64) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("--{name}: must be a positive number, got {v}"))
+    }
+}
+
+pub fn run(args: IdentifyArgs) -> Result<(), String> {
+    if args.out.exists() && !args.force {
+        return Err(format!("{}: exists; pass --force to overwrite it", args.out.display()));
+    }
+    let name = args
+        .name
+        .clone()
+        .or_else(|| args.out.file_stem().map(|s| s.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "identified".into());
+    let savgol = SavGol::new(args.savgol_window, args.savgol_order)
+        .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
+    let mut logs = Vec::new();
+    for path in &args.logs {
+        let log = uavgen::logs::read_log(path).map_err(|e| e.to_string())?;
+        for w in log.report.warnings() {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+        logs.push(log);
+    }
+    let dataset = build(
+        &logs,
+        &DatasetOptions {
+            savgol,
+            ..DatasetOptions::default()
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    let files: Vec<String> = args.logs.iter().map(|p| p.display().to_string()).collect();
+    let provenance = serde_json::json!({
+        "tool": format!("uavgen {} identify", env!("CARGO_PKG_VERSION")),
+        "logs": files,
+        "samples": dataset.len(),
+        "savitzky_golay": { "window": savgol.window, "order": savgol.order },
+    });
+    let json = match args.method {
+        Method::Sindy => {
+            check_positive("threshold", args.threshold)
+                .or_else(|e| if args.threshold == 0.0 { Ok(()) } else { Err(e) })?;
+            let optimizer = match args.optimizer {
+                OptimizerArg::Stlsq => Optimizer::Stlsq {
+                    threshold: args.threshold,
+                    alpha: 1e-3,
+                    max_iter: 20,
+                    unbias: true,
+                },
+                OptimizerArg::Sr3L0 => Optimizer::sr3(Regularizer::L0, args.threshold),
+                OptimizerArg::Sr3L1 => Optimizer::sr3(Regularizer::L1, args.threshold),
+            };
+            let sweep = args.sweep.then(|| {
+                let base = args.threshold.max(1e-3);
+                [0.1, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0]
+                    .iter()
+                    .map(|f| base * f)
+                    .collect::<Vec<f64>>()
+            });
+            let options = SindyOptions {
+                library: match args.library {
+                    LibraryArg::Paper => LibraryKind::Paper,
+                    LibraryArg::Physics => LibraryKind::Physics,
+                },
+                optimizer,
+                sweep,
+                selection: AicSelection::PerRow,
+                criterion: match args.criterion {
+                    CriterionArg::Aic => Criterion::Aic,
+                    CriterionArg::Bic => Criterion::Bic,
+                },
+                rows: if args.all_rows {
+                    FittedRows::All
+                } else {
+                    FittedRows::Dynamic
+                },
+                ..SindyOptions::default()
+            };
+            eprintln!(
+                "fitting SINDy on {} samples from {} log(s) ...",
+                dataset.len(),
+                logs.len()
+            );
+            let fit = sindy::fit(&dataset, &options, &name, provenance).map_err(|e| e.to_string())?;
+            for row in &fit.rows {
+                eprintln!(
+                    "  {:<10} {:>3} terms, training RMSE {:.4}, R² {:.3}",
+                    row.state, row.terms, row.rmse, row.r2
+                );
+            }
+            serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())?
+        }
+        Method::Pd => {
+            check_positive("mass", args.mass)?;
+            let mut options = PdFitOptions {
+                mass: args.mass,
+                ..PdFitOptions::default()
+            };
+            if let Some(lambda) = args.lowpass {
+                check_positive("lowpass", lambda)?;
+                options.lowpass = Some(LowPass { lambda });
+            }
+            eprintln!(
+                "fitting the PD model on {} samples from {} log(s) ...",
+                dataset.len(),
+                logs.len()
+            );
+            let fit = pd::fit(&dataset, &options, &name, provenance).map_err(|e| e.to_string())?;
+            eprintln!("{}", fit.diagnostics.summary());
+            serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())?
+        }
+    } + "\n";
+    // Exactly what `--model` will read, validated before anything is written.
+    uavgen::model::parse(&json, &args.out.display().to_string())
+        .map_err(|e| format!("the identified model is invalid: {e}"))?;
+    super::write_atomically(&args.out, &json)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}

@@ -1,0 +1,657 @@
+//! Evaluation of a model against flight logs: three prediction kinds, reported separately
+//! (never mixed). See docs/evaluate.md.
+//!
+//! 1. **One-step**: (a) the derivative f(x_k, u_k) against the Savitzky-Golay derivative of
+//!    the log (dynamic rows vx..yaw_rate only), (b) the next sample F(x_k, u_k) against x_{k+1}
+//!    (all 12 states), F = RK4 with M substeps over the segment's median Δt.
+//! 2. **Horizon free run**: from every sample k with k + H in the segment, start at the
+//!    measured x_k, apply the logged inputs (zero-order hold) for H samples, compare the H
+//!    predictions with the measured states (pooled), and separately at step H.
+//! 3. **Whole-flight free run**: each segment from its first sample to its end.
+//!
+//! A prediction that is not finite or exceeds [`DIVERGENCE_BOUND`] in magnitude ends its run
+//! (reported as `diverged_at`); metrics are computed over the finite part. Yaw errors are
+//! wrapped to (−π, π].
+
+mod plot;
+
+pub use plot::{plot_states, write_svg, PlotKind};
+
+use crate::discretize::{auto_substeps, discrete_step, Envelope, SubstepError};
+use crate::identify::dataset::{build, DatasetError, DatasetOptions};
+use crate::ir::ModelIr;
+use crate::logs::{median, FlightLog, Segment, YAW};
+use crate::metrics::{compare, Metrics, MetricsError};
+use crate::model::Model;
+use serde::Serialize;
+use std::fmt;
+
+/// Default horizon: the MPC's N = 30 samples.
+pub const DEFAULT_HORIZON: usize = 30;
+
+/// A predicted state whose magnitude exceeds this (or that is not finite) has diverged.
+pub const DIVERGENCE_BOUND: f64 = 1e6;
+
+/// The dynamic rows vx..yaw_rate, compared in the one-step derivative check.
+pub const DYNAMIC_STATES: std::ops::Range<usize> = 6..12;
+
+const NX: usize = 12;
+const NU: usize = 4;
+
+/// How to evaluate.
+#[derive(Clone, Debug)]
+pub struct EvaluateOptions {
+    /// Samples per horizon free run (default [`DEFAULT_HORIZON`]).
+    pub horizon: usize,
+    /// RK4 substeps per sample; `None` chooses them per sample period with
+    /// [`auto_substeps`] over the default [`Envelope`] (as the code generator does).
+    pub substeps: Option<usize>,
+    /// How the one-step derivative targets are computed (Savitzky-Golay window and order,
+    /// low-pass, edge trimming).
+    pub dataset: DatasetOptions,
+}
+
+impl Default for EvaluateOptions {
+    fn default() -> Self {
+        Self {
+            horizon: DEFAULT_HORIZON,
+            substeps: None,
+            dataset: DatasetOptions::default(),
+        }
+    }
+}
+
+/// Why an evaluation could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum EvaluateError {
+    #[error("model `{model}` has {nx} states and {nu} inputs, but flight logs have 12 states and 4 inputs")]
+    Dimensions { model: String, nx: usize, nu: usize },
+    #[error("no logs to evaluate")]
+    NoLogs,
+    #[error("the horizon must be at least 1 sample")]
+    ZeroHorizon,
+    #[error("the number of RK4 substeps must be at least 1")]
+    ZeroSubsteps,
+    #[error("derivative targets: {0}")]
+    Dataset(#[from] DatasetError),
+    #[error("{file}: segment {segment}: choosing RK4 substeps for Δt = {dt} s: {error}")]
+    Substeps {
+        file: String,
+        segment: usize,
+        dt: f64,
+        error: SubstepError,
+    },
+    #[error("metrics: {0}")]
+    Metrics(#[from] MetricsError),
+    #[error("{path}: cannot write the plot: {message}")]
+    Plot { path: String, message: String },
+}
+
+/// A one-step comparison (derivative or next sample).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OneStep {
+    /// Predictions made.
+    pub predictions: usize,
+    /// Predictions left out because they were not finite or exceeded [`DIVERGENCE_BOUND`].
+    pub excluded: usize,
+    /// Over the remaining predictions; `None` if there are none.
+    pub metrics: Option<Metrics>,
+}
+
+/// Free runs over the horizon, pooled.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Horizon {
+    /// Samples per run.
+    pub horizon: usize,
+    /// Runs started (one per sample that has `horizon` samples after it in its segment).
+    pub runs: usize,
+    /// Runs that diverged before their end.
+    pub diverged: usize,
+    /// All finite predictions of all runs (steps 1..=horizon) pooled.
+    pub metrics: Option<Metrics>,
+    /// The predictions at step `horizon` of the runs that reached it.
+    pub end: Option<Metrics>,
+    /// Overall RMSE (all states pooled) at each step 1..=horizon, over the runs that reached
+    /// that step; `null` where none did.
+    pub rmse_by_step: Vec<Option<f64>>,
+}
+
+/// Free runs over whole segments, pooled.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WholeFlight {
+    /// Runs (segments with at least two samples).
+    pub runs: usize,
+    /// Runs that diverged.
+    pub diverged: usize,
+    /// All finite predictions (samples 1.. of each segment) pooled.
+    pub metrics: Option<Metrics>,
+}
+
+/// One segment's figures.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SegmentEvaluation {
+    /// Index in the log's segments.
+    pub segment: usize,
+    pub samples: usize,
+    pub t_start: f64,
+    pub t_end: f64,
+    /// The step used: the segment's median Δt (s).
+    pub dt: f64,
+    /// RK4 substeps per sample.
+    pub substeps: usize,
+    /// Whole-flight free run: the first sample (0-based, in the segment) whose prediction
+    /// diverged, and its time.
+    pub diverged_at: Option<usize>,
+    pub diverged_t: Option<f64>,
+    /// Whole-flight free run over this segment (finite part).
+    pub whole_flight: Option<Metrics>,
+    /// Horizon runs started in this segment and how many diverged; the start sample of the
+    /// first that diverged.
+    pub horizon_runs: usize,
+    pub horizon_diverged: usize,
+    pub first_diverged_horizon: Option<usize>,
+}
+
+/// One log's figures: the three kinds over its segments, and per segment.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LogEvaluation {
+    pub source: String,
+    pub one_step_derivative: OneStep,
+    pub one_step_next: OneStep,
+    pub horizon: Horizon,
+    pub whole_flight: WholeFlight,
+    pub segments: Vec<SegmentEvaluation>,
+}
+
+/// The evaluation of a model on a set of logs. Top-level figures pool all logs.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Evaluation {
+    pub model: String,
+    pub model_kind: String,
+    /// Whether the substeps were chosen automatically.
+    pub substeps_auto: bool,
+    pub divergence_bound: f64,
+    /// Savitzky-Golay window and order of the derivative targets.
+    pub savgol_window: usize,
+    pub savgol_order: usize,
+    pub one_step_derivative: OneStep,
+    pub one_step_next: OneStep,
+    pub horizon: Horizon,
+    pub whole_flight: WholeFlight,
+    pub logs: Vec<LogEvaluation>,
+}
+
+/// Wrap an angle difference to (−π, π].
+pub fn wrap_angle(d: f64) -> f64 {
+    d.sin().atan2(d.cos())
+}
+
+fn finite(x: &[f64]) -> bool {
+    x.iter().all(|v| v.is_finite() && v.abs() <= DIVERGENCE_BOUND)
+}
+
+/// Predicted and observed rows of one kind, with yaw errors wrapped.
+#[derive(Clone, Default)]
+struct Pool {
+    predicted: Vec<Vec<f64>>,
+    observed: Vec<Vec<f64>>,
+}
+
+impl Pool {
+    /// `yaw`: the column holding yaw, if any; its prediction is replaced by
+    /// observed + wrapped difference.
+    fn push(&mut self, predicted: &[f64], observed: &[f64], yaw: Option<usize>) {
+        let mut p = predicted.to_vec();
+        if let Some(j) = yaw {
+            p[j] = observed[j] + wrap_angle(predicted[j] - observed[j]);
+        }
+        self.predicted.push(p);
+        self.observed.push(observed.to_vec());
+    }
+
+    fn extend(&mut self, other: &Pool) {
+        self.predicted.extend(other.predicted.iter().cloned());
+        self.observed.extend(other.observed.iter().cloned());
+    }
+
+    fn metrics(&self, names: &[String]) -> Result<Option<Metrics>, MetricsError> {
+        if self.predicted.is_empty() {
+            return Ok(None);
+        }
+        compare(&self.predicted, &self.observed, names).map(Some)
+    }
+}
+
+/// Sum of squared errors (all states) and count of runs at each horizon step.
+#[derive(Clone, Default)]
+struct StepErrors {
+    sq: Vec<f64>,
+    runs: Vec<usize>,
+}
+
+impl StepErrors {
+    fn new(h: usize) -> Self {
+        Self {
+            sq: vec![0.0; h],
+            runs: vec![0; h],
+        }
+    }
+
+    fn add(&mut self, step: usize, predicted: &[f64], observed: &[f64]) {
+        let e: f64 = (0..NX)
+            .map(|i| {
+                let d = predicted[i] - observed[i];
+                let d = if i == YAW { wrap_angle(d) } else { d };
+                d * d
+            })
+            .sum();
+        self.sq[step] += e;
+        self.runs[step] += 1;
+    }
+
+    fn merge(&mut self, other: &StepErrors) {
+        for j in 0..self.sq.len() {
+            self.sq[j] += other.sq[j];
+            self.runs[j] += other.runs[j];
+        }
+    }
+
+    fn rmse(&self) -> Vec<Option<f64>> {
+        self.sq
+            .iter()
+            .zip(&self.runs)
+            .map(|(&s, &n)| (n > 0).then(|| (s / (n * NX) as f64).sqrt()))
+            .collect()
+    }
+}
+
+/// Everything accumulated for one log (or all logs).
+#[derive(Clone)]
+struct Acc {
+    derivative: Pool,
+    derivative_made: usize,
+    next: Pool,
+    next_made: usize,
+    horizon: Pool,
+    horizon_end: Pool,
+    steps: StepErrors,
+    horizon_runs: usize,
+    horizon_diverged: usize,
+    whole: Pool,
+    whole_runs: usize,
+    whole_diverged: usize,
+}
+
+impl Acc {
+    fn new(h: usize) -> Self {
+        Self {
+            derivative: Pool::default(),
+            derivative_made: 0,
+            next: Pool::default(),
+            next_made: 0,
+            horizon: Pool::default(),
+            horizon_end: Pool::default(),
+            steps: StepErrors::new(h),
+            horizon_runs: 0,
+            horizon_diverged: 0,
+            whole: Pool::default(),
+            whole_runs: 0,
+            whole_diverged: 0,
+        }
+    }
+
+    fn merge(&mut self, o: &Acc) {
+        self.derivative.extend(&o.derivative);
+        self.derivative_made += o.derivative_made;
+        self.next.extend(&o.next);
+        self.next_made += o.next_made;
+        self.horizon.extend(&o.horizon);
+        self.horizon_end.extend(&o.horizon_end);
+        self.steps.merge(&o.steps);
+        self.horizon_runs += o.horizon_runs;
+        self.horizon_diverged += o.horizon_diverged;
+        self.whole.extend(&o.whole);
+        self.whole_runs += o.whole_runs;
+        self.whole_diverged += o.whole_diverged;
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn finish(&self, h: usize, names: &[String]) -> Result<(OneStep, OneStep, Horizon, WholeFlight), MetricsError> {
+        let dyn_names = &names[DYNAMIC_STATES];
+        let derivative = OneStep {
+            predictions: self.derivative_made,
+            excluded: self.derivative_made - self.derivative.predicted.len(),
+            metrics: self.derivative.metrics(dyn_names)?,
+        };
+        let next = OneStep {
+            predictions: self.next_made,
+            excluded: self.next_made - self.next.predicted.len(),
+            metrics: self.next.metrics(names)?,
+        };
+        let horizon = Horizon {
+            horizon: h,
+            runs: self.horizon_runs,
+            diverged: self.horizon_diverged,
+            metrics: self.horizon.metrics(names)?,
+            end: self.horizon_end.metrics(names)?,
+            rmse_by_step: self.steps.rmse(),
+        };
+        let whole = WholeFlight {
+            runs: self.whole_runs,
+            diverged: self.whole_diverged,
+            metrics: self.whole.metrics(names)?,
+        };
+        Ok((derivative, next, horizon, whole))
+    }
+}
+
+/// The model lowered once, with the step function.
+struct Stepper {
+    ir: ModelIr,
+    fixed: Option<usize>,
+    cache: Vec<(f64, usize)>,
+}
+
+impl Stepper {
+    fn new(model: &Model, options: &EvaluateOptions) -> Result<Self, EvaluateError> {
+        if model.nx() != NX || model.nu() != NU {
+            return Err(EvaluateError::Dimensions {
+                model: model.name.clone(),
+                nx: model.nx(),
+                nu: model.nu(),
+            });
+        }
+        if options.horizon == 0 {
+            return Err(EvaluateError::ZeroHorizon);
+        }
+        if options.substeps == Some(0) {
+            return Err(EvaluateError::ZeroSubsteps);
+        }
+        Ok(Self {
+            ir: ModelIr::new(model),
+            fixed: options.substeps,
+            cache: Vec::new(),
+        })
+    }
+
+    fn substeps(&mut self, dt: f64, file: &str, segment: usize) -> Result<usize, EvaluateError> {
+        if let Some(m) = self.fixed {
+            return Ok(m);
+        }
+        if let Some(&(_, m)) = self.cache.iter().find(|(d, _)| *d == dt) {
+            return Ok(m);
+        }
+        let m = auto_substeps(&self.ir, dt, &Envelope::default())
+            .map_err(|error| EvaluateError::Substeps {
+                file: file.to_string(),
+                segment,
+                dt,
+                error,
+            })?
+            .substeps;
+        self.cache.push((dt, m));
+        Ok(m)
+    }
+
+    /// F(x, u), or `None` if the result diverged.
+    fn step(&self, x: &[f64; NX], u: &[f64; NU], dt: f64, m: usize) -> Option<[f64; NX]> {
+        let next = discrete_step(&self.ir, x, u, dt, m);
+        if !finite(&next) {
+            return None;
+        }
+        let mut out = [0.0; NX];
+        out.copy_from_slice(&next);
+        Some(out)
+    }
+}
+
+/// The segment's median sample period, or `None` for a single sample.
+fn segment_dt(seg: &Segment) -> Option<f64> {
+    let steps: Vec<f64> = seg.t.windows(2).map(|w| w[1] - w[0]).collect();
+    median(&steps).filter(|d| d.is_finite() && *d > 0.0)
+}
+
+/// The whole-flight free run of a segment: predictions for samples 0.. (sample 0 is the
+/// measured initial state) up to, not including, the first diverged sample.
+fn free_run(st: &Stepper, seg: &Segment, dt: f64, m: usize) -> (Vec<[f64; NX]>, Option<usize>) {
+    let mut out = vec![seg.x[0]];
+    for k in 0..seg.len() - 1 {
+        match st.step(&out[k], &seg.u[k], dt, m) {
+            Some(x) => out.push(x),
+            None => return (out, Some(k + 1)),
+        }
+    }
+    (out, None)
+}
+
+/// A horizon run from sample k: predictions for k+1..=k+len (fewer if it diverged).
+fn horizon_run(st: &Stepper, seg: &Segment, k: usize, len: usize, dt: f64, m: usize) -> Vec<[f64; NX]> {
+    let mut out = Vec::with_capacity(len);
+    let mut x = seg.x[k];
+    for j in 0..len {
+        match st.step(&x, &seg.u[k + j], dt, m) {
+            Some(next) => {
+                out.push(next);
+                x = next;
+            }
+            None => break,
+        }
+    }
+    out
+}
+
+/// Evaluate `model` on `logs`: one-step (derivative and next sample), horizon free runs and
+/// whole-flight free runs, per segment, per log and pooled over all logs.
+pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) -> Result<Evaluation, EvaluateError> {
+    if logs.is_empty() {
+        return Err(EvaluateError::NoLogs);
+    }
+    let mut st = Stepper::new(model, options)?;
+    let names = model.states.clone();
+    let h = options.horizon;
+    let dataset = match build(logs, &options.dataset) {
+        Ok(d) => Some(d),
+        Err(DatasetError::Empty { .. }) => None,
+        Err(e) => return Err(e.into()),
+    };
+
+    let mut total = Acc::new(h);
+    let mut per_log = Vec::with_capacity(logs.len());
+    for (li, log) in logs.iter().enumerate() {
+        let mut acc = Acc::new(h);
+        // 1a. One-step derivative on the dataset's (possibly filtered, trimmed) samples.
+        for seg in dataset.iter().flat_map(|d| &d.segments).filter(|s| s.log == li) {
+            for ((x, u), dx) in seg.x.iter().zip(&seg.u).zip(&seg.dx) {
+                acc.derivative_made += 1;
+                let f = st.ir.eval_f(x, u);
+                if finite(&f) {
+                    acc.derivative.push(&f[DYNAMIC_STATES], &dx[DYNAMIC_STATES], None);
+                }
+            }
+        }
+        let mut segments = Vec::new();
+        for (si, seg) in log.segments.iter().enumerate() {
+            let n = seg.len();
+            let Some(dt) = segment_dt(seg) else {
+                continue;
+            };
+            let m = st.substeps(dt, &log.source, si)?;
+            // 1b. One-step next sample.
+            for k in 0..n - 1 {
+                acc.next_made += 1;
+                if let Some(p) = st.step(&seg.x[k], &seg.u[k], dt, m) {
+                    acc.next.push(&p, &seg.x[k + 1], Some(YAW));
+                }
+            }
+            // 2. Horizon free runs from every sample with a full horizon after it.
+            let (mut runs, mut diverged, mut first_diverged) = (0, 0, None);
+            for k in 0..n.saturating_sub(h) {
+                runs += 1;
+                let pred = horizon_run(&st, seg, k, h, dt, m);
+                for (j, p) in pred.iter().enumerate() {
+                    acc.horizon.push(p, &seg.x[k + j + 1], Some(YAW));
+                    acc.steps.add(j, p, &seg.x[k + j + 1]);
+                }
+                if pred.len() == h {
+                    acc.horizon_end.push(&pred[h - 1], &seg.x[k + h], Some(YAW));
+                } else {
+                    diverged += 1;
+                    first_diverged.get_or_insert(k);
+                }
+            }
+            acc.horizon_runs += runs;
+            acc.horizon_diverged += diverged;
+            // 3. Whole-flight free run.
+            let (pred, diverged_at) = free_run(&st, seg, dt, m);
+            let mut pool = Pool::default();
+            for k in 1..pred.len() {
+                pool.push(&pred[k], &seg.x[k], Some(YAW));
+            }
+            acc.whole.extend(&pool);
+            acc.whole_runs += 1;
+            acc.whole_diverged += diverged_at.is_some() as usize;
+            segments.push(SegmentEvaluation {
+                segment: si,
+                samples: n,
+                t_start: seg.t[0],
+                t_end: seg.t[n - 1],
+                dt,
+                substeps: m,
+                diverged_at,
+                diverged_t: diverged_at.map(|k| seg.t[k]),
+                whole_flight: pool.metrics(&names)?,
+                horizon_runs: runs,
+                horizon_diverged: diverged,
+                first_diverged_horizon: first_diverged,
+            });
+        }
+        let (one_step_derivative, one_step_next, horizon, whole_flight) = acc.finish(h, &names)?;
+        total.merge(&acc);
+        per_log.push(LogEvaluation {
+            source: log.source.clone(),
+            one_step_derivative,
+            one_step_next,
+            horizon,
+            whole_flight,
+            segments,
+        });
+    }
+    let (one_step_derivative, one_step_next, horizon, whole_flight) = total.finish(h, &names)?;
+    Ok(Evaluation {
+        model: model.name.clone(),
+        model_kind: model.kind_name().to_string(),
+        substeps_auto: options.substeps.is_none(),
+        divergence_bound: DIVERGENCE_BOUND,
+        savgol_window: options.dataset.savgol.window,
+        savgol_order: options.dataset.savgol.order,
+        one_step_derivative,
+        one_step_next,
+        horizon,
+        whole_flight,
+        logs: per_log,
+    })
+}
+
+/// Measured and predicted trajectories of one segment, for plots.
+#[derive(Clone, Debug)]
+pub struct SegmentTraces {
+    pub segment: usize,
+    pub t: Vec<f64>,
+    pub measured: Vec<[f64; NX]>,
+    /// Whole-flight free run from sample 0, up to the divergence if any.
+    pub free_run: Vec<[f64; NX]>,
+    pub diverged_at: Option<usize>,
+    /// Horizon free runs restarted every `horizon` samples (non-overlapping): (start sample,
+    /// predictions for start, start+1, …; the first is the measured start state).
+    pub horizon_runs: Vec<(usize, Vec<[f64; NX]>)>,
+    pub horizon: usize,
+}
+
+/// The traces of every segment (with at least two samples) of `log`.
+pub fn traces(model: &Model, log: &FlightLog, options: &EvaluateOptions) -> Result<Vec<SegmentTraces>, EvaluateError> {
+    let mut st = Stepper::new(model, options)?;
+    let h = options.horizon;
+    let mut out = Vec::new();
+    for (si, seg) in log.segments.iter().enumerate() {
+        let Some(dt) = segment_dt(seg) else {
+            continue;
+        };
+        let m = st.substeps(dt, &log.source, si)?;
+        let (free_run, diverged_at) = free_run(&st, seg, dt, m);
+        let horizon_runs = (0..seg.len() - 1)
+            .step_by(h)
+            .map(|k| {
+                let len = h.min(seg.len() - 1 - k);
+                let mut run = vec![seg.x[k]];
+                run.extend(horizon_run(&st, seg, k, len, dt, m));
+                (k, run)
+            })
+            .collect();
+        out.push(SegmentTraces {
+            segment: si,
+            t: seg.t.clone(),
+            measured: seg.x.clone(),
+            free_run,
+            diverged_at,
+            horizon_runs,
+            horizon: h,
+        });
+    }
+    Ok(out)
+}
+
+fn overall(m: &Option<Metrics>) -> String {
+    match m {
+        Some(m) => format!(
+            "RMSE {:.4}  MAE {:.4}  d1 {:.4}  ({} samples)",
+            m.overall_rmse, m.overall_mae, m.overall_d1, m.samples
+        ),
+        None => "no finite predictions".to_string(),
+    }
+}
+
+impl fmt::Display for Evaluation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "model {} ({}), {} log(s)",
+            self.model,
+            self.model_kind,
+            self.logs.len()
+        )?;
+        let d = &self.one_step_derivative;
+        writeln!(f, "one-step derivative (vx..yaw_rate): {}", overall(&d.metrics))?;
+        let n = &self.one_step_next;
+        writeln!(f, "one-step next sample:               {}", overall(&n.metrics))?;
+        let h = &self.horizon;
+        writeln!(
+            f,
+            "free run over {} samples:           {}; {} of {} runs diverged",
+            h.horizon,
+            overall(&h.metrics),
+            h.diverged,
+            h.runs
+        )?;
+        writeln!(f, "  at the end of the horizon:        {}", overall(&h.end))?;
+        let w = &self.whole_flight;
+        writeln!(
+            f,
+            "free run over the whole flight:     {}; {} of {} runs diverged",
+            overall(&w.metrics),
+            w.diverged,
+            w.runs
+        )?;
+        for log in &self.logs {
+            for s in &log.segments {
+                if let (Some(k), Some(t)) = (s.diverged_at, s.diverged_t) {
+                    writeln!(
+                        f,
+                        "  {} segment {}: the whole-flight free run diverged at sample {} (t = {} s)",
+                        log.source, s.segment, k, t
+                    )?;
+                }
+            }
+        }
+        Ok(())
+    }
+}

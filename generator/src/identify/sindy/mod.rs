@@ -1,0 +1,477 @@
+//! SINDy identification: ẋ ≈ Ξᵀ Θ(x, u) fitted to a [`Dataset`] with STLSQ or SR3 (PySINDy 2.x
+//! definitions), optionally with a sparsity sweep selected by AIC. The result is a `uavgen-model/1`
+//! [`SindyFile`] with provenance. See `docs/sindy.md`.
+
+pub mod library;
+pub mod optimizer;
+
+pub use library::{eval_term, paper_library, physics_library, Library, LibraryKind, PHYSICS_STATES};
+pub use optimizer::{lstsq, regress, Optimizer, OptimizerError, Regression, Regularizer};
+
+use super::dataset::Dataset;
+use crate::model::{Coefficient, SindyFile, DEFAULT_INPUTS, DEFAULT_STATES, FORMAT};
+use nalgebra::DMatrix;
+use serde_json::{json, Map, Value};
+
+/// The six rows known exactly: `[state, derivative]`.
+pub const KINEMATIC: [(&str, &str); 6] = [
+    ("x", "vx"),
+    ("y", "vy"),
+    ("z", "vz"),
+    ("roll", "roll_rate"),
+    ("pitch", "pitch_rate"),
+    ("yaw", "yaw_rate"),
+];
+
+/// The six fitted rows when the kinematic rows are exact.
+pub const DYNAMIC_STATES: [&str; 6] = ["vx", "vy", "vz", "roll_rate", "pitch_rate", "yaw_rate"];
+
+/// Which state derivatives are regressed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FittedRows {
+    /// The 6 dynamic rows; x..yaw are kinematic rows (ẋ = vx, …, yaw' = yaw_rate), not fitted.
+    Dynamic,
+    /// All 12 rows are regressed on Θ, as the paper does; no kinematic rows.
+    All,
+}
+
+/// How a sweep picks its sparsity parameter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AicSelection {
+    /// Every row takes the sweep value minimising its own AIC_i = N ln(RSS_i/N) + 2 k_i.
+    PerRow,
+    /// One value for all rows, minimising Σ_i AIC_i.
+    Total,
+}
+
+/// The information criterion a sweep minimises.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Criterion {
+    /// AIC = N ln(RSS/N) + 2k.
+    Aic,
+    /// BIC = N ln(RSS/N) + k ln N (a stronger penalty; AIC tends to keep spurious terms when the
+    /// sweep path offers many candidates).
+    Bic,
+}
+
+impl Criterion {
+    pub fn name(self) -> &'static str {
+        match self {
+            Criterion::Aic => "AIC",
+            Criterion::Bic => "BIC",
+        }
+    }
+}
+
+/// Everything that defines a SINDy fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SindyOptions {
+    pub library: LibraryKind,
+    pub optimizer: Optimizer,
+    /// PySINDy's `normalize_columns`: regress on Θ with unit-2-norm columns, rescale Ξ back.
+    pub normalize_columns: bool,
+    /// Values of the sparsity parameter (`threshold` for STLSQ, `reg_weight_lam` for SR3) to try;
+    /// `None`: fit once with the optimiser's own value.
+    pub sweep: Option<Vec<f64>>,
+    pub selection: AicSelection,
+    /// AIC (default) or BIC.
+    pub criterion: Criterion,
+    pub rows: FittedRows,
+}
+
+impl Default for SindyOptions {
+    /// Physics library, 6 dynamic rows, STLSQ (threshold 0.05, α = 1e-3, unbiased) on normalised
+    /// columns, no sweep, per-row AIC if a sweep is given.
+    fn default() -> Self {
+        Self {
+            library: LibraryKind::Physics,
+            optimizer: Optimizer::Stlsq {
+                threshold: 0.05,
+                alpha: 1e-3,
+                max_iter: 20,
+                unbias: true,
+            },
+            normalize_columns: true,
+            sweep: None,
+            selection: AicSelection::PerRow,
+            criterion: Criterion::Aic,
+            rows: FittedRows::Dynamic,
+        }
+    }
+}
+
+/// Why a fit failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SindyError {
+    #[error("the dataset has no samples")]
+    Empty,
+    #[error("the dataset has {samples} samples, fewer than the {terms} library terms")]
+    TooFewSamples { samples: usize, terms: usize },
+    #[error("non-finite value in the data (sample {0})")]
+    NonFinite(usize),
+    #[error("the sweep is empty")]
+    EmptySweep,
+    #[error("sweep value {0} is not finite and >= 0")]
+    BadSweepValue(f64),
+    #[error("model name must not be empty")]
+    EmptyName,
+    #[error(transparent)]
+    Optimizer(#[from] OptimizerError),
+}
+
+/// One row's fit quality on the training data (in the units of ẋ).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RowFit {
+    pub state: String,
+    /// Non-zero coefficients.
+    pub terms: usize,
+    pub rss: f64,
+    pub rmse: f64,
+    /// 1 − RSS / Σ (ẋ − mean ẋ)².
+    pub r2: f64,
+    /// N ln(max(RSS/N, floor)) + 2 k, floor = 1e-24 · mean(ẋ²).
+    pub aic: f64,
+    /// Same with the penalty k ln N.
+    pub bic: f64,
+    /// The sparsity parameter this row's coefficients were fitted with.
+    pub sparsity: f64,
+}
+
+/// One sweep value: its regression and per-row scores.
+#[derive(Clone, Debug)]
+pub struct SweepPoint {
+    pub value: f64,
+    pub iterations: usize,
+    pub converged: bool,
+    pub rows: Vec<RowFit>,
+    pub total_aic: f64,
+    pub total_bic: f64,
+}
+
+/// The result of [`fit`].
+#[derive(Clone, Debug)]
+pub struct SindyFit {
+    /// The model, ready to be serialised (`serde_json::to_string_pretty`) and read by `model::parse`.
+    pub file: SindyFile,
+    /// Fitted states, in state order.
+    pub targets: Vec<String>,
+    /// Ξ: one row per target, one column per `file.library` term (zeros included).
+    pub coefficients: DMatrix<f64>,
+    /// The chosen coefficients' scores, one per target.
+    pub rows: Vec<RowFit>,
+    /// Every sweep value (one entry without a sweep).
+    pub sweep: Vec<SweepPoint>,
+    pub samples: usize,
+    /// Library terms that are identically zero on the data, left out of the regression (coefficient 0).
+    pub dropped_terms: Vec<String>,
+}
+
+impl SindyFit {
+    /// The model file as pretty-printed JSON with a trailing newline.
+    pub fn to_json(&self) -> String {
+        let mut s = serde_json::to_string_pretty(&self.file).expect("a SindyFile serialises");
+        s.push('\n');
+        s
+    }
+}
+
+fn names(list: &[&str]) -> Vec<String> {
+    list.iter().map(|s| s.to_string()).collect()
+}
+
+/// Fit a SINDy model to `dataset`. `provenance` (an object, or anything else which is then kept
+/// under `"source"`) is extended with the method, library, optimiser settings, selection and metrics.
+pub fn fit(dataset: &Dataset, options: &SindyOptions, name: &str, provenance: Value) -> Result<SindyFit, SindyError> {
+    if name.trim().is_empty() {
+        return Err(SindyError::EmptyName);
+    }
+    options.optimizer.validate()?;
+    let vars: Vec<String> = DEFAULT_STATES
+        .iter()
+        .chain(DEFAULT_INPUTS.iter())
+        .map(|s| s.to_string())
+        .collect();
+    let library = Library::new(options.library.terms(), &vars).expect("built-in libraries parse");
+    let n = dataset.len();
+    if n == 0 {
+        return Err(SindyError::Empty);
+    }
+    let targets: Vec<String> = match options.rows {
+        FittedRows::Dynamic => names(&DYNAMIC_STATES),
+        FittedRows::All => names(&DEFAULT_STATES),
+    };
+    let target_idx: Vec<usize> = targets
+        .iter()
+        .map(|t| DEFAULT_STATES.iter().position(|s| s == t).expect("a default state"))
+        .collect();
+    let mut values = Vec::with_capacity(n);
+    let mut y = DMatrix::zeros(n, targets.len());
+    for (k, (x, u, dx)) in dataset.samples().enumerate() {
+        let v: Vec<f64> = x.iter().chain(u.iter()).copied().collect();
+        if v.iter().chain(dx.iter()).any(|a| !a.is_finite()) {
+            return Err(SindyError::NonFinite(k));
+        }
+        values.push(v);
+        for (c, &i) in target_idx.iter().enumerate() {
+            y[(k, c)] = dx[i];
+        }
+    }
+    let theta_full = library.matrix(values.iter().map(|v| v.as_slice()));
+    // Identically zero columns cannot be normalised and carry no information: leave them out.
+    let kept: Vec<usize> = (0..library.len())
+        .filter(|&j| theta_full.column(j).iter().any(|&v| v != 0.0))
+        .collect();
+    let dropped_terms: Vec<String> = (0..library.len())
+        .filter(|j| !kept.contains(j))
+        .map(|j| library.names[j].clone())
+        .collect();
+    if n < kept.len() {
+        return Err(SindyError::TooFewSamples {
+            samples: n,
+            terms: kept.len(),
+        });
+    }
+    let theta = theta_full.select_columns(&kept);
+
+    let values_to_try: Vec<f64> = match &options.sweep {
+        None => vec![options.optimizer.sparsity()],
+        Some(v) if v.is_empty() => return Err(SindyError::EmptySweep),
+        Some(v) => {
+            if let Some(&bad) = v.iter().find(|a| !(a.is_finite() && **a >= 0.0)) {
+                return Err(SindyError::BadSweepValue(bad));
+            }
+            v.clone()
+        }
+    };
+    let mut sweep = Vec::with_capacity(values_to_try.len());
+    let mut coefs = Vec::with_capacity(values_to_try.len());
+    for &value in &values_to_try {
+        let opt = options.optimizer.with_sparsity(value);
+        let reg = regress(&theta, &y, &opt, options.normalize_columns)?;
+        let rows = score(&theta, &y, &reg.coef, &targets, value);
+        let total_aic = rows.iter().map(|r| r.aic).sum();
+        let total_bic = rows.iter().map(|r| r.bic).sum();
+        sweep.push(SweepPoint {
+            value,
+            iterations: reg.iterations,
+            converged: reg.converged,
+            rows,
+            total_aic,
+            total_bic,
+        });
+        coefs.push(reg.coef);
+    }
+    let chosen = select(&sweep, options.selection, options.criterion, targets.len());
+
+    // Assemble Ξ over the full library.
+    let mut coefficients = DMatrix::zeros(targets.len(), library.len());
+    let mut rows = Vec::with_capacity(targets.len());
+    for (t, &j) in chosen.iter().enumerate() {
+        for (c, &col) in kept.iter().enumerate() {
+            coefficients[(t, col)] = coefs[j][(t, c)];
+        }
+        rows.push(sweep[j].rows[t].clone());
+    }
+
+    let mut entries = Vec::new();
+    for (t, state) in targets.iter().enumerate() {
+        for (col, term) in library.names.iter().enumerate() {
+            let c = coefficients[(t, col)];
+            if c != 0.0 {
+                entries.push(Coefficient {
+                    state: state.clone(),
+                    term: term.clone(),
+                    coefficient: c,
+                });
+            }
+        }
+    }
+    let kinematic = match options.rows {
+        FittedRows::Dynamic => KINEMATIC.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect(),
+        FittedRows::All => Vec::new(),
+    };
+    let provenance = build_provenance(provenance, options, n, &targets, &rows, &sweep, &dropped_terms);
+    let file = SindyFile {
+        format: FORMAT.to_string(),
+        kind: "sindy".to_string(),
+        name: name.to_string(),
+        states: None,
+        inputs: None,
+        provenance,
+        library: library.names.clone(),
+        kinematic,
+        coefficients: entries,
+    };
+    Ok(SindyFit {
+        file,
+        targets,
+        coefficients,
+        rows,
+        sweep,
+        samples: n,
+        dropped_terms,
+    })
+}
+
+/// Per-row RSS, RMSE, R² and AIC of `coef` (targets × features) on (theta, y).
+pub fn score(
+    theta: &DMatrix<f64>,
+    y: &DMatrix<f64>,
+    coef: &DMatrix<f64>,
+    targets: &[String],
+    value: f64,
+) -> Vec<RowFit> {
+    let n = theta.nrows() as f64;
+    let pred = theta * coef.transpose();
+    targets
+        .iter()
+        .enumerate()
+        .map(|(t, state)| {
+            let col = y.column(t);
+            let rss: f64 = col
+                .iter()
+                .zip(pred.column(t).iter())
+                .map(|(a, b)| (a - b).powi(2))
+                .sum();
+            let mean = col.mean();
+            let tss: f64 = col.iter().map(|a| (a - mean).powi(2)).sum();
+            let ms: f64 = col.iter().map(|a| a * a).sum::<f64>() / n;
+            let k = coef.row(t).iter().filter(|&&c| c != 0.0).count();
+            RowFit {
+                state: state.clone(),
+                terms: k,
+                rss,
+                rmse: (rss / n).sqrt(),
+                r2: if tss > 0.0 { 1.0 - rss / tss } else { f64::NAN },
+                aic: aic(rss, theta.nrows(), k, ms),
+                bic: aic(rss, theta.nrows(), k, ms) + (((theta.nrows() as f64).ln() - 2.0) * k as f64),
+                sparsity: value,
+            }
+        })
+        .collect()
+}
+
+/// AIC = N ln(σ²) + 2k with σ² = max(RSS/N, 1e-24 · mean(ẋ²), f64::MIN_POSITIVE): the floor makes
+/// exact fits (RSS ≈ 0 up to rounding) tie, so the sparser one wins.
+pub fn aic(rss: f64, n: usize, k: usize, mean_square: f64) -> f64 {
+    let n = n as f64;
+    let sigma2 = (rss / n).max(1e-24 * mean_square).max(f64::MIN_POSITIVE);
+    n * sigma2.ln() + 2.0 * k as f64
+}
+
+/// Index into `sweep` chosen for each target: the minimum AIC, ties to fewer terms, then to the
+/// earlier sweep value.
+fn select(sweep: &[SweepPoint], selection: AicSelection, criterion: Criterion, targets: usize) -> Vec<usize> {
+    let ic = |r: &RowFit| match criterion {
+        Criterion::Aic => r.aic,
+        Criterion::Bic => r.bic,
+    };
+    let total = |p: &SweepPoint| match criterion {
+        Criterion::Aic => p.total_aic,
+        Criterion::Bic => p.total_bic,
+    };
+    let better = |a: (f64, usize), b: (f64, usize)| a.0 < b.0 || (a.0 == b.0 && a.1 < b.1);
+    match selection {
+        AicSelection::PerRow => (0..targets)
+            .map(|t| {
+                let mut best = 0;
+                for j in 1..sweep.len() {
+                    let (a, b) = (&sweep[j].rows[t], &sweep[best].rows[t]);
+                    if better((ic(a), a.terms), (ic(b), b.terms)) {
+                        best = j;
+                    }
+                }
+                best
+            })
+            .collect(),
+        AicSelection::Total => {
+            let k = |p: &SweepPoint| p.rows.iter().map(|r| r.terms).sum::<usize>();
+            let mut best = 0;
+            for j in 1..sweep.len() {
+                if better((total(&sweep[j]), k(&sweep[j])), (total(&sweep[best]), k(&sweep[best]))) {
+                    best = j;
+                }
+            }
+            vec![best; targets]
+        }
+    }
+}
+
+fn round6(v: f64) -> Value {
+    if !v.is_finite() {
+        return Value::Null;
+    }
+    let s = format!("{v:.6e}");
+    json!(s.parse::<f64>().unwrap_or(v))
+}
+
+fn build_provenance(
+    user: Value,
+    options: &SindyOptions,
+    samples: usize,
+    targets: &[String],
+    rows: &[RowFit],
+    sweep: &[SweepPoint],
+    dropped: &[String],
+) -> Value {
+    let mut p = match user {
+        Value::Object(m) => m,
+        Value::Null => Map::new(),
+        other => {
+            let mut m = Map::new();
+            m.insert("source".into(), other);
+            m
+        }
+    };
+    let per_row = |f: &dyn Fn(&RowFit) -> Value| -> Value {
+        Value::Object(rows.iter().map(|r| (r.state.clone(), f(r))).collect())
+    };
+    p.insert("method".into(), json!("sindy"));
+    p.insert("tool".into(), json!(format!("uavgen {}", env!("CARGO_PKG_VERSION"))));
+    p.insert("library".into(), json!(options.library.name()));
+    p.insert(
+        "fitted_rows".into(),
+        json!({
+            "targets": targets,
+            "kinematic_exact": options.rows == FittedRows::Dynamic,
+        }),
+    );
+    p.insert("optimizer".into(), options.optimizer.to_json());
+    p.insert("normalize_columns".into(), json!(options.normalize_columns));
+    if let Some(values) = &options.sweep {
+        p.insert(
+            "sweep".into(),
+            json!({
+                "parameter": options.optimizer.sparsity_name(),
+                "values": values,
+                "criterion": options.criterion.name(),
+                "penalty_per_term": match options.criterion {
+                    Criterion::Aic => "2".to_string(),
+                    Criterion::Bic => format!("ln N = {}", (samples as f64).ln()),
+                },
+                "selection": match options.selection {
+                    AicSelection::PerRow => "per row: each row takes the value minimising N ln(RSS_i/N) + penalty k_i",
+                    AicSelection::Total => "total: one value for all rows, minimising the sum over rows",
+                },
+                "total_aic": sweep.iter().map(|s| round6(s.total_aic)).collect::<Vec<_>>(),
+                "total_bic": sweep.iter().map(|s| round6(s.total_bic)).collect::<Vec<_>>(),
+                "selected": per_row(&|r| json!(r.sparsity)),
+            }),
+        );
+    }
+    if !dropped.is_empty() {
+        p.insert("dropped_zero_columns".into(), json!(dropped));
+    }
+    p.insert(
+        "fit".into(),
+        json!({
+            "samples": samples,
+            "derivative_rmse": per_row(&|r| round6(r.rmse)),
+            "r2": per_row(&|r| round6(r.r2)),
+            "aic": per_row(&|r| round6(r.aic)),
+            "bic": per_row(&|r| round6(r.bic)),
+            "terms": per_row(&|r| json!(r.terms)),
+        }),
+    );
+    Value::Object(p)
+}

@@ -1,0 +1,492 @@
+//! Sparse regression: STLSQ and SR3 (L0, L1) with PySINDy 2.x semantics.
+//!
+//! Both solve Ẏ ≈ Θ Ξ for all targets at once, exactly as `pysindy.optimizers.STLSQ` and
+//! `pysindy.optimizers.SR3` do in `BaseOptimizer.fit` (PySINDy 2.1.0):
+//!
+//! 1. if `normalize_columns`, every column of Θ is divided by its 2-norm;
+//! 2. the initial guess is the (minimum-norm) least-squares solution `lstsq(Θ, Ẏ)`;
+//! 3. the optimiser's `_reduce` runs (see [`stlsq`] and [`sr3`] in the docs of [`Optimizer`]);
+//! 4. the support is `|ξ| > 1e-14`; with `unbias` the support is refitted by plain least squares;
+//! 5. with `normalize_columns`, the coefficients are divided by the column norms (back to the units of Θ).
+//!
+//! The thresholds therefore act on the coefficients of the *normalised* columns when
+//! `normalize_columns` is set. See `docs/sindy.md`.
+
+use nalgebra::{DMatrix, DVector};
+use serde_json::{json, Value};
+
+/// The regulariser R of SR3.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Regularizer {
+    /// R(v) = ‖v‖₀; prox = hard thresholding at √(2 λ ν).
+    L0,
+    /// R(v) = ‖v‖₁; prox = soft thresholding at λ ν.
+    L1,
+}
+
+impl Regularizer {
+    pub fn name(self) -> &'static str {
+        match self {
+            Regularizer::L0 => "L0",
+            Regularizer::L1 => "L1",
+        }
+    }
+}
+
+/// A sparse-regression algorithm and its settings (PySINDy 2.x parameter names).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Optimizer {
+    /// Sequentially thresholded least squares (`ps.STLSQ`): repeat { ridge regression
+    /// min ‖y − Θ_S ξ‖² + α‖ξ‖² on the current support S; drop |ξ| < threshold } until the support
+    /// stops changing (or nothing was dropped in the first pass), at most `max_iter` passes.
+    Stlsq {
+        threshold: f64,
+        alpha: f64,
+        max_iter: usize,
+        unbias: bool,
+    },
+    /// Sparse relaxed regularised regression (`ps.SR3`): minimises
+    /// ½‖Y − Θ W‖² + λ R(V) + (1/2ν)‖W − V‖² by alternating
+    /// W ← (ΘᵀΘ + I/ν)⁻¹ (ΘᵀY + V/ν), V ← prox_{λν R}(W), from V = lstsq(Θ, Y), until
+    /// ‖V_k − V_{k−1}‖_F / ν < tol or `max_iter` iterations. The result is V.
+    Sr3 {
+        regularizer: Regularizer,
+        /// λ (`reg_weight_lam`).
+        reg_weight_lam: f64,
+        /// ν (`relax_coeff_nu`).
+        relax_coeff_nu: f64,
+        max_iter: usize,
+        tol: f64,
+        unbias: bool,
+    },
+}
+
+impl Optimizer {
+    /// `ps.STLSQ(threshold=threshold)` with PySINDy's other defaults: alpha 0.05, max_iter 20, unbias.
+    pub fn stlsq(threshold: f64) -> Self {
+        Optimizer::Stlsq {
+            threshold,
+            alpha: 0.05,
+            max_iter: 20,
+            unbias: true,
+        }
+    }
+
+    /// `ps.SR3(reg_weight_lam=lambda, regularizer=..)` with PySINDy's defaults: ν = 1, max_iter 30,
+    /// tol 1e-5, no unbiasing.
+    pub fn sr3(regularizer: Regularizer, reg_weight_lam: f64) -> Self {
+        Optimizer::Sr3 {
+            regularizer,
+            reg_weight_lam,
+            relax_coeff_nu: 1.0,
+            max_iter: 30,
+            tol: 1e-5,
+            unbias: false,
+        }
+    }
+
+    /// The sparsity parameter that a sweep varies: `threshold` (STLSQ) or `reg_weight_lam` (SR3).
+    pub fn sparsity(&self) -> f64 {
+        match self {
+            Optimizer::Stlsq { threshold, .. } => *threshold,
+            Optimizer::Sr3 { reg_weight_lam, .. } => *reg_weight_lam,
+        }
+    }
+
+    /// The same optimiser with another sparsity parameter.
+    pub fn with_sparsity(&self, value: f64) -> Self {
+        let mut o = self.clone();
+        match &mut o {
+            Optimizer::Stlsq { threshold, .. } => *threshold = value,
+            Optimizer::Sr3 { reg_weight_lam, .. } => *reg_weight_lam = value,
+        }
+        o
+    }
+
+    /// Name of the sparsity parameter (`threshold` or `reg_weight_lam`).
+    pub fn sparsity_name(&self) -> &'static str {
+        match self {
+            Optimizer::Stlsq { .. } => "threshold",
+            Optimizer::Sr3 { .. } => "reg_weight_lam",
+        }
+    }
+
+    /// The settings as JSON, with PySINDy's parameter names.
+    pub fn to_json(&self) -> Value {
+        match self {
+            Optimizer::Stlsq {
+                threshold,
+                alpha,
+                max_iter,
+                unbias,
+            } => json!({
+                "name": "STLSQ", "threshold": threshold, "alpha": alpha, "max_iter": max_iter, "unbias": unbias
+            }),
+            Optimizer::Sr3 {
+                regularizer,
+                reg_weight_lam,
+                relax_coeff_nu,
+                max_iter,
+                tol,
+                unbias,
+            } => json!({
+                "name": "SR3", "regularizer": regularizer.name(), "reg_weight_lam": reg_weight_lam,
+                "relax_coeff_nu": relax_coeff_nu, "max_iter": max_iter, "tol": tol, "unbias": unbias
+            }),
+        }
+    }
+
+    /// Reject settings PySINDy rejects (and non-finite ones).
+    pub fn validate(&self) -> Result<(), OptimizerError> {
+        let bad = |m: String| Err(OptimizerError::Settings(m));
+        match *self {
+            Optimizer::Stlsq {
+                threshold,
+                alpha,
+                max_iter,
+                ..
+            } => {
+                if !(threshold.is_finite() && threshold >= 0.0) {
+                    return bad(format!("STLSQ threshold must be finite and >= 0, got {threshold}"));
+                }
+                if !(alpha.is_finite() && alpha >= 0.0) {
+                    return bad(format!("STLSQ alpha must be finite and >= 0, got {alpha}"));
+                }
+                if max_iter == 0 {
+                    return bad("STLSQ max_iter must be positive".into());
+                }
+            }
+            Optimizer::Sr3 {
+                reg_weight_lam,
+                relax_coeff_nu,
+                max_iter,
+                tol,
+                ..
+            } => {
+                if !(reg_weight_lam.is_finite() && reg_weight_lam >= 0.0) {
+                    return bad(format!(
+                        "SR3 reg_weight_lam must be finite and >= 0, got {reg_weight_lam}"
+                    ));
+                }
+                if !(relax_coeff_nu.is_finite() && relax_coeff_nu > 0.0) {
+                    return bad(format!(
+                        "SR3 relax_coeff_nu must be finite and > 0, got {relax_coeff_nu}"
+                    ));
+                }
+                if !(tol.is_finite() && tol > 0.0) {
+                    return bad(format!("SR3 tol must be finite and > 0, got {tol}"));
+                }
+                if max_iter == 0 {
+                    return bad("SR3 max_iter must be positive".into());
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a regression could not run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OptimizerError {
+    #[error("invalid optimiser settings: {0}")]
+    Settings(String),
+    #[error("library and targets have different sample counts ({0} and {1})")]
+    Shape(usize, usize),
+    #[error("no samples")]
+    Empty,
+    #[error("library column {0} is all zero: it cannot be normalised")]
+    ZeroColumn(usize),
+    #[error("non-finite value in the library or the targets")]
+    NonFinite,
+}
+
+/// Result of one regression.
+#[derive(Clone, Debug)]
+pub struct Regression {
+    /// Ξ as PySINDy's `coef_`: one row per target, one column per library column, in the units of Θ.
+    pub coef: DMatrix<f64>,
+    /// Passes of STLSQ / iterations of SR3 that ran.
+    pub iterations: usize,
+    /// Whether the stopping rule was met before `max_iter` (PySINDy warns otherwise).
+    pub converged: bool,
+}
+
+/// Fit Ẏ ≈ Θ Ξᵀ (`theta`: samples × features, `y`: samples × targets) like PySINDy's
+/// `optimizer.fit(theta, y)`.
+pub fn regress(
+    theta: &DMatrix<f64>,
+    y: &DMatrix<f64>,
+    optimizer: &Optimizer,
+    normalize_columns: bool,
+) -> Result<Regression, OptimizerError> {
+    optimizer.validate()?;
+    if theta.nrows() != y.nrows() {
+        return Err(OptimizerError::Shape(theta.nrows(), y.nrows()));
+    }
+    if theta.nrows() == 0 {
+        return Err(OptimizerError::Empty);
+    }
+    if theta.iter().chain(y.iter()).any(|v| !v.is_finite()) {
+        return Err(OptimizerError::NonFinite);
+    }
+    let p = theta.ncols();
+    let mut x = theta.clone();
+    let mut norms = DVector::from_element(p, 1.0);
+    if normalize_columns {
+        for j in 0..p {
+            let n = x.column(j).norm();
+            if n == 0.0 {
+                return Err(OptimizerError::ZeroColumn(j));
+            }
+            norms[j] = n;
+            x.column_mut(j).unscale_mut(n);
+        }
+    }
+    // Initial guess: lstsq(x, y), features × targets.
+    let init = lstsq(&x, y);
+    let (mut coef, iterations, converged, unbias) = match *optimizer {
+        Optimizer::Stlsq {
+            threshold,
+            alpha,
+            max_iter,
+            unbias,
+        } => {
+            let (c, it, conv) = stlsq(&x, y, &init, threshold, alpha, max_iter);
+            (c, it, conv, unbias)
+        }
+        Optimizer::Sr3 {
+            regularizer,
+            reg_weight_lam,
+            relax_coeff_nu,
+            max_iter,
+            tol,
+            unbias,
+        } => {
+            let (c, it, conv) = sr3(&x, y, &init, regularizer, reg_weight_lam, relax_coeff_nu, max_iter, tol);
+            (c, it, conv, unbias)
+        }
+    };
+    if unbias {
+        for t in 0..coef.nrows() {
+            let support: Vec<usize> = (0..p).filter(|&j| coef[(t, j)].abs() > 1e-14).collect();
+            let mut row = vec![0.0; p];
+            if !support.is_empty() {
+                let xs = x.select_columns(&support);
+                let ys = DMatrix::from_column_slice(y.nrows(), 1, y.column(t).as_slice());
+                let w = lstsq(&xs, &ys);
+                for (k, &j) in support.iter().enumerate() {
+                    row[j] = w[(k, 0)];
+                }
+            }
+            for j in 0..p {
+                coef[(t, j)] = row[j];
+            }
+        }
+    }
+    if normalize_columns {
+        for j in 0..p {
+            coef.column_mut(j).unscale_mut(norms[j]);
+        }
+    }
+    Ok(Regression {
+        coef,
+        iterations,
+        converged,
+    })
+}
+
+/// Minimum-norm least squares `numpy.linalg.lstsq(a, b, rcond=None)`: features × targets.
+/// Householder QR when `a` has full column rank (the solution is then unique), SVD otherwise.
+pub fn lstsq(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let (n, p) = a.shape();
+    let rcond = f64::EPSILON * n.max(p) as f64;
+    if n >= p && p > 0 {
+        let qr = a.clone().qr();
+        let r = qr.r();
+        let dmax = (0..p).map(|i| r[(i, i)].abs()).fold(0.0, f64::max);
+        // A diagonal of R far below its largest entry means (near) rank deficiency: use the SVD.
+        if (0..p).all(|i| r[(i, i)].abs() > dmax * rcond * 1e3) {
+            let mut qtb = b.clone();
+            qr.q_tr_mul(&mut qtb);
+            let rp = r.view((0, 0), (p, p)).into_owned();
+            let rhs = qtb.rows(0, p).into_owned();
+            if let Some(sol) = rp.solve_upper_triangular(&rhs) {
+                return sol;
+            }
+        }
+    }
+    let svd = a.clone().svd(true, true);
+    let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
+    svd.solve(b, smax * rcond)
+        .unwrap_or_else(|_| DMatrix::zeros(p, b.ncols()))
+}
+
+/// Solve the symmetric positive (semi)definite system `a w = b` like `scipy.linalg.solve(assume_a="pos")`;
+/// falls back to a pseudo-inverse if the Cholesky factorisation fails.
+fn solve_spd(a: DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    match a.clone().cholesky() {
+        Some(ch) => ch.solve(b),
+        None => {
+            let svd = a.svd(true, true);
+            let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
+            svd.solve(b, smax * f64::EPSILON * b.nrows().max(1) as f64)
+                .unwrap_or_else(|_| DMatrix::zeros(b.nrows(), b.ncols()))
+        }
+    }
+}
+
+/// `STLSQ._reduce`. `init`: features × targets. Returns targets × features.
+fn stlsq(
+    x: &DMatrix<f64>,
+    y: &DMatrix<f64>,
+    init: &DMatrix<f64>,
+    threshold: f64,
+    alpha: f64,
+    max_iter: usize,
+) -> (DMatrix<f64>, usize, bool) {
+    let p = x.ncols();
+    let t = y.ncols();
+    let gram = x.transpose() * x;
+    let xty = x.transpose() * y;
+    let mut ind = vec![vec![true; p]; t];
+    let n_selected0 = t * p;
+    // Non-zero pattern of the previous history entry (the lstsq guess first).
+    let pattern = |m: &DMatrix<f64>, transposed: bool| -> Vec<bool> {
+        let mut v = Vec::with_capacity(t * p);
+        for i in 0..t {
+            for j in 0..p {
+                v.push(if transposed { m[(j, i)] } else { m[(i, j)] } != 0.0);
+            }
+        }
+        v
+    };
+    let mut last_nonzero = pattern(init, true);
+    let mut optvar = DMatrix::zeros(t, p);
+    let mut iterations = 0;
+    let mut converged = false;
+    for _ in 0..max_iter {
+        if ind.iter().all(|r| r.iter().all(|&b| !b)) {
+            optvar = DMatrix::zeros(t, p);
+            converged = true;
+            break;
+        }
+        optvar = DMatrix::zeros(t, p);
+        for i in 0..t {
+            let sel: Vec<usize> = (0..p).filter(|&j| ind[i][j]).collect();
+            if sel.is_empty() {
+                continue;
+            }
+            let k = sel.len();
+            let mut a = DMatrix::zeros(k, k);
+            let mut b = DMatrix::zeros(k, 1);
+            for (r, &jr) in sel.iter().enumerate() {
+                for (c, &jc) in sel.iter().enumerate() {
+                    a[(r, c)] = gram[(jr, jc)];
+                }
+                a[(r, r)] += alpha;
+                b[(r, 0)] = xty[(jr, i)];
+            }
+            let w = solve_spd(a, &b);
+            for (r, &j) in sel.iter().enumerate() {
+                let c = w[(r, 0)];
+                if c.abs() >= threshold {
+                    optvar[(i, j)] = c;
+                    ind[i][j] = true;
+                } else {
+                    ind[i][j] = false;
+                }
+            }
+        }
+        iterations += 1;
+        let nonzero = pattern(&optvar, false);
+        let count: usize = ind.iter().map(|r| r.iter().filter(|&&b| b).count()).sum();
+        let no_change = nonzero == last_nonzero;
+        last_nonzero = nonzero;
+        if count == n_selected0 || no_change {
+            converged = true;
+            break;
+        }
+    }
+    (optvar, iterations, converged)
+}
+
+/// `SR3._reduce` (no trimming). `init`: features × targets. Returns targets × features.
+#[allow(clippy::too_many_arguments)]
+fn sr3(
+    x: &DMatrix<f64>,
+    y: &DMatrix<f64>,
+    init: &DMatrix<f64>,
+    regularizer: Regularizer,
+    lam: f64,
+    nu: f64,
+    max_iter: usize,
+    tol: f64,
+) -> (DMatrix<f64>, usize, bool) {
+    let p = x.ncols();
+    let mut a = x.transpose() * x;
+    for j in 0..p {
+        a[(j, j)] += 1.0 / nu;
+    }
+    let xty = x.transpose() * y;
+    let chol = a.clone().cholesky();
+    let weight = lam * nu;
+    let prox = |v: f64| -> f64 {
+        match regularizer {
+            Regularizer::L0 => {
+                if v.abs() > (2.0 * weight).sqrt() {
+                    v
+                } else {
+                    0.0
+                }
+            }
+            Regularizer::L1 => v.signum() * (v.abs() - weight).max(0.0),
+        }
+    };
+    let mut sparse = init.clone();
+    let mut iterations = 0;
+    let mut converged = false;
+    for _ in 0..max_iter {
+        let rhs = &xty + &sparse / nu;
+        let full = match &chol {
+            Some(c) => c.solve(&rhs),
+            None => solve_spd(a.clone(), &rhs),
+        };
+        let next = full.map(prox);
+        iterations += 1;
+        let err = (&next - &sparse).norm() / nu;
+        sparse = next;
+        if err < tol {
+            converged = true;
+            break;
+        }
+    }
+    (sparse.transpose(), iterations, converged)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lstsq_matches_normal_equations() {
+        let a = DMatrix::from_row_slice(4, 2, &[1.0, 0.0, 1.0, 1.0, 1.0, 2.0, 1.0, 3.0]);
+        let b = DMatrix::from_row_slice(4, 1, &[1.0, 3.0, 5.0, 7.0]);
+        let w = lstsq(&a, &b);
+        assert!((w[(0, 0)] - 1.0).abs() < 1e-12 && (w[(1, 0)] - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn prox_signs() {
+        // L1 soft thresholding shrinks toward zero; np.sign(0) = 0.
+        let x = DMatrix::from_row_slice(3, 1, &[1.0, 0.0, 0.0]);
+        let y = DMatrix::from_row_slice(3, 1, &[2.0, 0.0, 0.0]);
+        let r = regress(
+            &x.columns(0, 1).into_owned(),
+            &y,
+            &Optimizer::sr3(Regularizer::L1, 0.5),
+            false,
+        )
+        .unwrap();
+        assert!(r.coef[(0, 0)] > 0.0 && r.coef[(0, 0)] < 2.0);
+    }
+}
