@@ -456,3 +456,103 @@ fn cap_is_reported_and_the_input_is_safe() {
     );
     assert!(!out2.exists());
 }
+
+/// A log simulated from `pd_hover` under varied inputs, in the LOG_FORMAT.md format.
+fn simulated_log(path: &Path, samples: usize) {
+    let m = uavgen::load(&repo().join("models/pd_hover.json")).unwrap();
+    let ir = uavgen::ModelIr::new(&m);
+    let mut x = vec![0.0; 12];
+    x[2] = 5.0;
+    let mut text = String::from(
+        "# rate_hz: 30\nt,x,y,z,roll,pitch,yaw,vx,vy,vz,roll_rate,pitch_rate,yaw_rate,u_vz,u_roll,u_pitch,u_yaw_rate\n",
+    );
+    for k in 0..samples {
+        let t = k as f64 / 30.0;
+        let u = [
+            0.8 * (0.7 * t).sin(),
+            0.2 * (1.3 * t).sin(),
+            0.2 * (0.9 * t + 1.0).sin(),
+            0.5 * (0.4 * t).sin(),
+        ];
+        let row: Vec<String> = std::iter::once(t)
+            .chain(x.iter().copied())
+            .chain(u)
+            .map(|v| format!("{v}"))
+            .collect();
+        text.push_str(&row.join(","));
+        text.push('\n');
+        x = uavgen::discretize::discrete_step(&ir, &x, &u, 1.0 / 30.0, 2);
+    }
+    fs::write(path, text).unwrap();
+}
+
+#[test]
+fn identify_and_evaluate_from_logs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = tmp.path().join("flight.csv");
+    simulated_log(&log, 600);
+    for method in ["pd", "sindy"] {
+        let out = tmp.path().join(format!("{method}.json"));
+        let o = uavgen(&[
+            "identify",
+            "--method",
+            method,
+            "--log",
+            log.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{method}: {}", stderr(&o));
+        let model = uavgen::load(&out).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(model.nx(), 12);
+        let o = uavgen(&[
+            "evaluate",
+            "--model",
+            out.to_str().unwrap(),
+            "--log",
+            log.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(String::from_utf8_lossy(&o.stdout).contains("free run over 30 samples"));
+        // An existing output is refused without --force.
+        let o = uavgen(&[
+            "identify",
+            "--method",
+            method,
+            "--log",
+            log.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success() && stderr(&o).contains("--force"));
+    }
+    // The PD fit recovers the simulating model's hover thrust ξ13 = m g.
+    let pd: serde_json::Value = serde_json::from_str(&fs::read_to_string(tmp.path().join("pd.json")).unwrap()).unwrap();
+    let xi13 = pd["xi"]
+        .as_array()
+        .map(|a| a[12].as_f64().unwrap())
+        .unwrap_or_else(|| pd["xi"]["xi13"].as_f64().unwrap());
+    assert!((xi13 / (2.4 * 9.81) - 1.0).abs() < 0.02, "xi13 = {xi13}");
+
+    // A log without the yaw column is named, and nothing is written.
+    let bad = tmp.path().join("bad.csv");
+    let text = fs::read_to_string(&log).unwrap().replacen(",yaw,", ",heading,", 1);
+    fs::write(&bad, text).unwrap();
+    let out = tmp.path().join("never.json");
+    let o = uavgen(&[
+        "identify",
+        "--method",
+        "sindy",
+        "--log",
+        bad.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("bad.csv") && stderr(&o).contains("yaw"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists());
+}
