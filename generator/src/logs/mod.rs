@@ -19,24 +19,9 @@ pub use segments::{median, unwrap_angle, SegmentStart, GAP_PERIODS};
 
 use std::path::Path;
 
-/// The state columns in the order of [`Segment::x`].
-pub const STATE_COLUMNS: [&str; 12] = [
-    "x",
-    "y",
-    "z",
-    "roll",
-    "pitch",
-    "yaw",
-    "vx",
-    "vy",
-    "vz",
-    "roll_rate",
-    "pitch_rate",
-    "yaw_rate",
-];
-
-/// The input columns in the order of [`Segment::u`].
-pub const INPUT_COLUMNS: [&str; 4] = ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"];
+/// The state columns in the order of [`Segment::x`] and the input columns in the order of
+/// [`Segment::u`]: the model format's default names (LOG_FORMAT.md).
+pub use crate::model::{DEFAULT_INPUTS as INPUT_COLUMNS, DEFAULT_STATES as STATE_COLUMNS};
 
 /// Index of yaw in the state vector.
 pub const YAW: usize = 5;
