@@ -305,24 +305,10 @@ impl Mpc {
         if self.qp.factorize(&self.h).is_ok() {
             return Some(false);
         }
-        let mut scale: Real = 1.0;
-        for i in 0..NV {
-            if !self.h[i][i].is_finite() {
-                return None;
-            }
-            scale = scale.max(self.h[i][i].abs());
+        if self.h.iter().enumerate().any(|(i, row)| !row[i].is_finite()) {
+            return None;
         }
-        let mut delta = sqrt(Real::EPSILON) * scale;
-        for _ in 0..8 {
-            for i in 0..NV {
-                self.h[i][i] += delta;
-            }
-            if self.qp.factorize(&self.h).is_ok() {
-                return Some(true);
-            }
-            delta *= 100.0;
-        }
-        None
+        self.factorize_regularised().then_some(true)
     }
 
     /// The previous plan: its first input, nothing changed.
