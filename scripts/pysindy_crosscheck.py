@@ -63,9 +63,9 @@ def paper_library():
 def physics_library():
     t = ["1"] + PHYSICS_STATES + INPUTS + [f"{s}^2" for s in PHYSICS_STATES]
     t += [f"{s}*{u}" for s in PHYSICS_STATES for u in INPUTS]
-    t += ["sin(roll)", "sin(pitch)", "cos(roll)", "cos(pitch)", "cos(roll)*cos(pitch)"]
+    t += ["cos(roll)", "cos(pitch)", "cos(roll)*cos(pitch)"]
     t += ["sin(yaw)", "cos(yaw)"]
-    for a in ["roll", "pitch", "u_roll", "u_pitch", "sin(roll)", "sin(pitch)"]:
+    for a in ["u_roll", "u_pitch", "sin(roll)", "sin(pitch)"]:
         t += [f"{a}*sin(yaw)", f"{a}*cos(yaw)"]
     return t
 

@@ -219,6 +219,7 @@ macro_rules! comparisons {
 
 comparisons!(sindy, sindy_m100, "sindy_m100", hovers: true);
 comparisons!(pd_hover_model, pd_hover, "pd_hover", hovers: true);
+comparisons!(pd_m100_model, pd_m100, "pd_m100", hovers: true);
 // The paper's ξ do not hold the aircraft up: with saturated inputs the large-residual
 // Gauss-Newton iteration cycles (in both solvers alike), so only agreement is checked.
 comparisons!(pd_paper_model, pd_paper, "pd_paper", hovers: false);

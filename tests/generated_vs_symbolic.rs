@@ -41,6 +41,7 @@ macro_rules! check_model {
 check_model!(pd_paper_matches_symbolic, pd_paper, "pd_paper");
 check_model!(pd_hover_matches_symbolic, pd_hover, "pd_hover");
 check_model!(sindy_m100_matches_symbolic, sindy_m100, "sindy_m100");
+check_model!(pd_m100_matches_symbolic, pd_m100, "pd_m100");
 
 #[test]
 fn f32_crate_tracks_the_f64_model() {

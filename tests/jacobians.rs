@@ -145,6 +145,13 @@ jacobian_tests!(
     "pd_hover"
 );
 jacobian_tests!(
+    pd_m100_discrete_jacobians_match_fd,
+    pd_m100_prop,
+    pd_m100_continuous_jacobians_match_symbolic,
+    pd_m100,
+    "pd_m100"
+);
+jacobian_tests!(
     sindy_discrete_jacobians_match_fd,
     sindy_prop,
     sindy_continuous_jacobians_match_symbolic,

@@ -65,6 +65,12 @@ fn sindy_tracks_the_circle() {
 }
 
 #[test]
+fn pd_m100_tracks_the_circle() {
+    let rmse = closed_loop!(pd_m100);
+    assert!(rmse < 1.0);
+}
+
+#[test]
 fn pd_hover_tracks_the_circle() {
     let rmse = closed_loop!(pd_hover);
     assert!(rmse < 1.0);

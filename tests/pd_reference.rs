@@ -129,6 +129,7 @@ macro_rules! reference_test {
 
 reference_test!(pd_paper_matches_hand_written_reference, pd_paper, "pd_paper");
 reference_test!(pd_hover_matches_hand_written_reference, pd_hover, "pd_hover");
+reference_test!(pd_m100_matches_hand_written_reference, pd_m100, "pd_m100");
 
 /// Symbolic M and C of the generator, evaluated by its interpreter.
 struct SymbolicMc {

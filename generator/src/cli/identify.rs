@@ -2,7 +2,9 @@
 
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
+use uavgen::identify::bounded_selection::select_bounded;
 use uavgen::identify::dataset::{build, DatasetOptions};
+use uavgen::identify::horizon_check::{self, HorizonCheck};
 use uavgen::identify::pd::{self, PdFitOptions};
 use uavgen::identify::preprocess::{LowPass, SavGol};
 use uavgen::identify::sindy::{
@@ -76,6 +78,14 @@ pub struct IdentifyArgs {
     /// SINDy: sweep the sparsity parameter and select by an information criterion.
     #[arg(long)]
     sweep: bool,
+    /// SINDy: the sweep's values (comma separated). Default: STLSQ thresholds 0.5, 1, 2, …, 64;
+    /// SR3 λ = --threshold × 0.1, 0.2, 0.5, 1, 2, 4, 8, 16.
+    #[arg(long, value_delimiter = ',')]
+    sweep_values: Option<Vec<f64>>,
+    /// Write the model even if it fails the horizon check (one MPC horizon of free run from random
+    /// envelope states under constant, often saturated, inputs must stay bounded).
+    #[arg(long)]
+    no_horizon_check: bool,
     /// SINDy: criterion of the sweep.
     #[arg(long, value_enum, default_value_t = CriterionArg::Aic)]
     criterion: CriterionArg,
@@ -85,6 +95,21 @@ pub struct IdentifyArgs {
     /// PD: the paper's first-order low-pass λ/(s+λ) with this λ in rad/s (the paper: 1).
     #[arg(long)]
     lowpass: Option<f64>,
+}
+
+/// The default STLSQ sweep: thresholds on normalised columns (they scale like √N, docs/sindy.md).
+const STLSQ_SWEEP: [f64; 8] = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0];
+/// The default SR3 sweep, as multiples of --threshold.
+const SR3_SWEEP: [f64; 8] = [0.1, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len as u64);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg} ({elapsed})") {
+        bar.set_style(style);
+    }
+    bar.set_message(what.to_string());
+    bar
 }
 
 fn check_positive(name: &str, v: f64) -> Result<(), String> {
@@ -143,12 +168,13 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
                 OptimizerArg::Sr3L0 => Optimizer::sr3(Regularizer::L0, args.threshold),
                 OptimizerArg::Sr3L1 => Optimizer::sr3(Regularizer::L1, args.threshold),
             };
-            let sweep = args.sweep.then(|| {
-                let base = args.threshold.max(1e-3);
-                [0.1, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0]
-                    .iter()
-                    .map(|f| base * f)
-                    .collect::<Vec<f64>>()
+            if args.sweep_values.is_some() && !args.sweep {
+                return Err("--sweep-values: only with --sweep".into());
+            }
+            let sweep = args.sweep.then(|| match (&args.sweep_values, args.optimizer) {
+                (Some(v), _) => v.clone(),
+                (None, OptimizerArg::Stlsq) => STLSQ_SWEEP.to_vec(),
+                (None, _) => SR3_SWEEP.iter().map(|f| args.threshold.max(1e-3) * f).collect(),
             });
             let options = SindyOptions {
                 library: match args.library {
@@ -174,7 +200,20 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
                 dataset.len(),
                 logs.len()
             );
-            let fit = sindy::fit(&dataset, &options, &name, provenance).map_err(|e| e.to_string())?;
+            let bar = progress_bar(options.sweep.as_ref().map_or(1, Vec::len), "sparsity values");
+            let fit = sindy::fit_with_progress(&dataset, &options, &name, provenance, &mut |done, _| {
+                bar.set_position(done as u64)
+            })
+            .map_err(|e| e.to_string())?;
+            bar.finish_and_clear();
+            let mut fit = fit;
+            if options.sweep.is_some() && !args.no_horizon_check {
+                if let Some(sel) = select_bounded(&mut fit, &HorizonCheck::default()) {
+                    for (row, from, to) in &sel.moves {
+                        eprintln!("  horizon check: {row} moved from sparsity {from} to {to}");
+                    }
+                }
+            }
             for row in &fit.rows {
                 eprintln!(
                     "  {:<10} {:>3} terms, training RMSE {:.4}, R² {:.3}",
@@ -204,8 +243,20 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         }
     } + "\n";
     // Exactly what `--model` will read, validated before anything is written.
-    uavgen::model::parse(&json, &args.out.display().to_string())
+    let model = uavgen::model::parse(&json, &args.out.display().to_string())
         .map_err(|e| format!("the identified model is invalid: {e}"))?;
+    if let Some(report) = horizon_check::check(&model, &HorizonCheck::default()) {
+        eprintln!("{}", report.summary());
+        if !report.passed() && !args.no_horizon_check {
+            return Err(format!(
+                "{}: not written: the identified model leaves the bounds within one MPC horizon ({} of {} trials); \
+                 raise --threshold (or pick a sparser sweep), or pass --no-horizon-check to write it anyway",
+                args.out.display(),
+                report.unbounded,
+                report.trials
+            ));
+        }
+    }
     super::write_atomically(&args.out, &json)?;
     println!("wrote {}", args.out.display());
     Ok(())

@@ -53,16 +53,22 @@ const MAX_SCHUR_ITERATIONS: usize = 10_000;
 /// Eigenvalues of `a`, or — if the Schur iteration stalls twice — a
 /// conservative cover of the left half-disc of radius ‖A‖∞.
 fn eigenvalues(a: &DMatrix<f64>) -> Vec<Complex<f64>> {
-    let schur = |m: DMatrix<f64>| Schur::try_new(m, f64::EPSILON, MAX_SCHUR_ITERATIONS);
-    if let Some(s) = schur(a.clone()) {
-        return s.complex_eigenvalues().iter().copied().collect();
+    // nalgebra can return a NaN imaginary part for a 2×2 block whose discriminant rounds to
+    // a tiny negative number (seen on nilpotent Jacobians): such a result is not used.
+    let schur = |m: DMatrix<f64>| {
+        Schur::try_new(m, f64::EPSILON, MAX_SCHUR_ITERATIONS)
+            .map(|s| s.complex_eigenvalues().iter().copied().collect::<Vec<Complex<f64>>>())
+            .filter(|l| l.iter().all(|z| z.re.is_finite() && z.im.is_finite()))
+    };
+    if let Some(l) = schur(a.clone()) {
+        return l;
     }
     let n = a.nrows();
     let scale = 1e-12 * a.amax().max(1.0);
     // Deterministic, unstructured perturbation.
     let perturbed = a + DMatrix::from_fn(n, n, |i, j| scale * (((7 * i + 3 * j) % 11) as f64 - 5.0) / 5.0);
-    if let Some(s) = schur(perturbed) {
-        return s.complex_eigenvalues().iter().copied().collect();
+    if let Some(l) = schur(perturbed) {
+        return l;
     }
     let radius = a
         .row_iter()
@@ -124,6 +130,20 @@ mod tests {
         // Imaginary axis: stable up to 2√2.
         assert!(rk4_stability_function(Complex::new(0.0, 2.8)).norm() <= 1.0);
         assert!(rk4_stability_function(Complex::new(0.0, 2.9)).norm() > 1.0);
+    }
+
+    #[test]
+    fn eigenvalues_are_always_finite() {
+        // Kinematic rows only (a model whose dynamic rows are all empty): nilpotent.
+        let mut a = DMatrix::zeros(12, 12);
+        for i in 0..6 {
+            a[(i, i + 6)] = 1.0;
+        }
+        a[(6, 3)] = 10.03;
+        a[(6, 4)] = 10.12;
+        a[(7, 3)] = -9.44;
+        let l = eigenvalues(&a);
+        assert!(l.iter().all(|z| z.re.is_finite() && z.im.is_finite()), "{l:?}");
     }
 
     #[test]

@@ -1,4 +1,6 @@
+pub mod bounded_selection;
 pub mod dataset;
+pub mod horizon_check;
 pub mod pd;
 pub mod preprocess;
 pub mod sindy;

@@ -10,7 +10,7 @@ pub enum LibraryKind {
     /// `models/sindy_m100.json`).
     Paper,
     /// Translation- and heading-invariant candidates (no raw x, y, z, yaw; heading only through
-    /// sin(yaw)/cos(yaw) products), 72 terms. See [`physics_library`].
+    /// sin(yaw)/cos(yaw) products), 66 terms. See [`physics_library`].
     Physics,
 }
 
@@ -62,15 +62,20 @@ pub fn paper_library() -> Vec<String> {
 /// The states the physics library uses directly: everything but x, y, z and yaw.
 pub const PHYSICS_STATES: [&str; 8] = ["roll", "pitch", "vx", "vy", "vz", "roll_rate", "pitch_rate", "yaw_rate"];
 
-/// The physics-aware library, 72 terms, in this order:
+/// The physics-aware library, 66 terms, in this order:
 ///
 /// - `1`;
 /// - the 8 invariant states (roll pitch vx vy vz roll_rate pitch_rate yaw_rate), the 4 inputs;
 /// - the 8 squares of those states;
 /// - the 32 products invariant state × input (state-major);
-/// - `sin(roll) sin(pitch) cos(roll) cos(pitch)`, `cos(roll)*cos(pitch)` (vertical thrust component);
-/// - heading: `sin(yaw) cos(yaw)` and `a*sin(yaw)`, `a*cos(yaw)` for a in roll, pitch, u_roll, u_pitch,
-///   sin(roll), sin(pitch) (the world-frame components of body-frame tilts and tilt commands).
+/// - `cos(roll) cos(pitch)`, `cos(roll)*cos(pitch)` (vertical thrust component);
+/// - heading: `sin(yaw) cos(yaw)` and `a*sin(yaw)`, `a*cos(yaw)` for a in u_roll, u_pitch, sin(roll),
+///   sin(pitch) (the world-frame components of body-frame tilts and tilt commands).
+///
+/// An angle appears either bare (`roll`, in the attitude loops) or as its sine (`sin(roll)*cos(yaw)`,
+/// in the thrust direction), never both in one role: `roll` and `sin(roll)` are nearly collinear
+/// over the flight envelope, and a fit that keeps both returns large cancelling pairs (26 roll·sin ψ
+/// − 16 sin(roll)·sin ψ) whose difference is a spurious cubic outside the data.
 ///
 /// Raw x, y, z and yaw never appear, so the fitted dynamics are invariant under translation, and
 /// heading enters only as a rotation of body-frame quantities.
@@ -84,18 +89,12 @@ pub fn physics_library() -> Vec<String> {
             t.push(format!("{s}*{u}"));
         }
     }
-    for s in [
-        "sin(roll)",
-        "sin(pitch)",
-        "cos(roll)",
-        "cos(pitch)",
-        "cos(roll)*cos(pitch)",
-    ] {
+    for s in ["cos(roll)", "cos(pitch)", "cos(roll)*cos(pitch)"] {
         t.push(s.to_string());
     }
     t.push("sin(yaw)".into());
     t.push("cos(yaw)".into());
-    for a in ["roll", "pitch", "u_roll", "u_pitch", "sin(roll)", "sin(pitch)"] {
+    for a in ["u_roll", "u_pitch", "sin(roll)", "sin(pitch)"] {
         t.push(format!("{a}*sin(yaw)"));
         t.push(format!("{a}*cos(yaw)"));
     }
@@ -168,19 +167,21 @@ mod tests {
     }
 
     #[test]
-    fn paper_library_matches_shipped_model() {
+    fn physics_library_matches_shipped_model() {
+        // models/sindy_m100.json is identified with the physics library (scripts/identify_m100.sh).
         let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../models/sindy_m100.json")).unwrap();
         let v: serde_json::Value = serde_json::from_str(&text).unwrap();
         let lib: Vec<String> = serde_json::from_value(v["library"].clone()).unwrap();
-        assert_eq!(paper_library(), lib);
-        assert_eq!(lib.len(), 155);
+        assert_eq!(physics_library(), lib);
+        assert_eq!(lib.len(), 66);
+        assert_eq!(paper_library().len(), 155);
     }
 
     #[test]
     fn physics_library_is_invariant_and_unique() {
         let vars = vars();
         let lib = Library::new(physics_library(), &vars).unwrap();
-        assert_eq!(lib.len(), 72);
+        assert_eq!(lib.len(), 66);
         let mut seen = std::collections::HashSet::new();
         for t in &lib.terms {
             assert!(seen.insert(t.clone()), "duplicate {}", t.display(&vars));

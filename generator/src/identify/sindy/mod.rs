@@ -77,6 +77,23 @@ pub struct SindyOptions {
     /// AIC (default) or BIC.
     pub criterion: Criterion,
     pub rows: FittedRows,
+    /// The sample count N the information criteria use (default: [`SampleCount::Effective`]).
+    pub sample_count: SampleCount,
+}
+
+/// The N of AIC = N ln(RSS/N) + 2k and BIC = N ln(RSS/N) + k ln N.
+///
+/// Derivatives from a Savitzky-Golay window, and logs with repeated (sample-and-hold) rows, give
+/// residuals that are strongly correlated from one sample to the next: the rows are not N
+/// independent observations, and with the raw N every criterion keeps nearly every candidate term.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SampleCount {
+    /// N = the number of samples (independent residuals).
+    Raw,
+    /// N_eff = N / τ, τ = 1 + 2 Σ ρ_k the integrated autocorrelation time of the row's residual under
+    /// the densest fit of the sweep (ρ_k summed while positive), the same N_eff for every sweep value
+    /// of that row.
+    Effective,
 }
 
 impl Default for SindyOptions {
@@ -96,6 +113,7 @@ impl Default for SindyOptions {
             selection: AicSelection::PerRow,
             criterion: Criterion::Aic,
             rows: FittedRows::Dynamic,
+            sample_count: SampleCount::Effective,
         }
     }
 }
@@ -135,6 +153,8 @@ pub struct RowFit {
     pub bic: f64,
     /// The sparsity parameter this row's coefficients were fitted with.
     pub sparsity: f64,
+    /// The N of the criteria ([`SampleCount`]).
+    pub n_ic: f64,
 }
 
 /// One sweep value: its regression and per-row scores.
@@ -164,9 +184,53 @@ pub struct SindyFit {
     pub samples: usize,
     /// Library terms that are identically zero on the data, left out of the regression (coefficient 0).
     pub dropped_terms: Vec<String>,
+    /// Ξ of every sweep value (same layout as `coefficients`).
+    pub sweep_coefficients: Vec<DMatrix<f64>>,
+    /// The sweep value (index into `sweep`) each target's row is taken from.
+    pub chosen: Vec<usize>,
+    options: SindyOptions,
+    user_provenance: Value,
 }
 
 impl SindyFit {
+    /// Take each target's row from sweep value `chosen[t]`: rebuilds `coefficients`, `rows` and `file`.
+    pub fn choose(&mut self, chosen: &[usize]) {
+        assert_eq!(chosen.len(), self.targets.len(), "one sweep index per target");
+        let (nt, nl) = (self.targets.len(), self.file.library.len());
+        let mut coefficients = DMatrix::zeros(nt, nl);
+        let mut rows = Vec::with_capacity(nt);
+        for (t, &j) in chosen.iter().enumerate() {
+            coefficients.set_row(t, &self.sweep_coefficients[j].row(t));
+            rows.push(self.sweep[j].rows[t].clone());
+        }
+        let mut entries = Vec::new();
+        for (t, state) in self.targets.iter().enumerate() {
+            for (col, term) in self.file.library.iter().enumerate() {
+                let c = coefficients[(t, col)];
+                if c != 0.0 {
+                    entries.push(Coefficient {
+                        state: state.clone(),
+                        term: term.clone(),
+                        coefficient: c,
+                    });
+                }
+            }
+        }
+        self.file.provenance = build_provenance(
+            self.user_provenance.clone(),
+            &self.options,
+            self.samples,
+            &self.targets,
+            &rows,
+            &self.sweep,
+            &self.dropped_terms,
+        );
+        self.file.coefficients = entries;
+        self.coefficients = coefficients;
+        self.rows = rows;
+        self.chosen = chosen.to_vec();
+    }
+
     /// The model file as pretty-printed JSON with a trailing newline.
     pub fn to_json(&self) -> String {
         let mut s = serde_json::to_string_pretty(&self.file).expect("a SindyFile serialises");
@@ -182,6 +246,17 @@ fn names(list: &[&str]) -> Vec<String> {
 /// Fit a SINDy model to `dataset`. `provenance` (an object, or anything else which is then kept
 /// under `"source"`) is extended with the method, library, optimiser settings, selection and metrics.
 pub fn fit(dataset: &Dataset, options: &SindyOptions, name: &str, provenance: Value) -> Result<SindyFit, SindyError> {
+    fit_with_progress(dataset, options, name, provenance, &mut |_, _| {})
+}
+
+/// [`fit`], calling `progress(done, total)` after each sweep value's regression.
+pub fn fit_with_progress(
+    dataset: &Dataset,
+    options: &SindyOptions,
+    name: &str,
+    provenance: Value,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<SindyFit, SindyError> {
     if name.trim().is_empty() {
         return Err(SindyError::EmptyName);
     }
@@ -243,12 +318,29 @@ pub fn fit(dataset: &Dataset, options: &SindyOptions, name: &str, provenance: Va
             v.clone()
         }
     };
-    let mut sweep = Vec::with_capacity(values_to_try.len());
-    let mut coefs = Vec::with_capacity(values_to_try.len());
+    let mut regressions = Vec::with_capacity(values_to_try.len());
     for &value in &values_to_try {
         let opt = options.optimizer.with_sparsity(value);
-        let reg = regress(&theta, &y, &opt, options.normalize_columns)?;
-        let rows = score(&theta, &y, &reg.coef, &targets, value);
+        regressions.push(regress(&theta, &y, &opt, options.normalize_columns)?);
+        progress(regressions.len(), values_to_try.len());
+    }
+    // N of the criteria, per row, from the densest fit (most non-zero coefficients).
+    let densest = (0..regressions.len())
+        .max_by_key(|&j| {
+            (
+                regressions[j].coef.iter().filter(|&&c| c != 0.0).count(),
+                usize::MAX - j,
+            )
+        })
+        .unwrap_or(0);
+    let n_ic: Vec<f64> = match options.sample_count {
+        SampleCount::Raw => vec![n as f64; targets.len()],
+        SampleCount::Effective => effective_samples(&theta, &y, &regressions[densest].coef),
+    };
+    let mut sweep = Vec::with_capacity(values_to_try.len());
+    let mut coefs = Vec::with_capacity(values_to_try.len());
+    for (&value, reg) in values_to_try.iter().zip(regressions) {
+        let rows = score(&theta, &y, &reg.coef, &targets, value, &n_ic);
         let total_aic = rows.iter().map(|r| r.aic).sum();
         let total_bic = rows.iter().map(|r| r.bic).sum();
         sweep.push(SweepPoint {
@@ -262,64 +354,84 @@ pub fn fit(dataset: &Dataset, options: &SindyOptions, name: &str, provenance: Va
         coefs.push(reg.coef);
     }
     let chosen = select(&sweep, options.selection, options.criterion, targets.len());
-
-    // Assemble Ξ over the full library.
-    let mut coefficients = DMatrix::zeros(targets.len(), library.len());
-    let mut rows = Vec::with_capacity(targets.len());
-    for (t, &j) in chosen.iter().enumerate() {
-        for (c, &col) in kept.iter().enumerate() {
-            coefficients[(t, col)] = coefs[j][(t, c)];
-        }
-        rows.push(sweep[j].rows[t].clone());
-    }
-
-    let mut entries = Vec::new();
-    for (t, state) in targets.iter().enumerate() {
-        for (col, term) in library.names.iter().enumerate() {
-            let c = coefficients[(t, col)];
-            if c != 0.0 {
-                entries.push(Coefficient {
-                    state: state.clone(),
-                    term: term.clone(),
-                    coefficient: c,
-                });
+    // Every sweep value's Ξ over the full library.
+    let sweep_coefficients = coefs
+        .iter()
+        .map(|c| {
+            let mut full = DMatrix::zeros(targets.len(), library.len());
+            for (k, &col) in kept.iter().enumerate() {
+                full.set_column(col, &c.column(k));
             }
-        }
-    }
-    let kinematic = match options.rows {
-        FittedRows::Dynamic => KINEMATIC.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect(),
-        FittedRows::All => Vec::new(),
-    };
-    let provenance = build_provenance(provenance, options, n, &targets, &rows, &sweep, &dropped_terms);
-    let file = SindyFile {
-        format: FORMAT.to_string(),
-        kind: "sindy".to_string(),
-        name: name.to_string(),
-        states: None,
-        inputs: None,
-        provenance,
-        library: library.names.clone(),
-        kinematic,
-        coefficients: entries,
-    };
-    Ok(SindyFit {
-        file,
+            full
+        })
+        .collect();
+    let mut fit = SindyFit {
+        file: SindyFile {
+            format: FORMAT.to_string(),
+            kind: "sindy".to_string(),
+            name: name.to_string(),
+            states: None,
+            inputs: None,
+            provenance: Value::Null,
+            library: library.names.clone(),
+            kinematic: match options.rows {
+                FittedRows::Dynamic => KINEMATIC.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect(),
+                FittedRows::All => Vec::new(),
+            },
+            coefficients: Vec::new(),
+        },
         targets,
-        coefficients,
-        rows,
+        coefficients: DMatrix::zeros(0, 0),
+        rows: Vec::new(),
         sweep,
         samples: n,
         dropped_terms,
-    })
+        sweep_coefficients,
+        chosen: Vec::new(),
+        options: options.clone(),
+        user_provenance: provenance,
+    };
+    fit.choose(&chosen);
+    Ok(fit)
 }
 
-/// Per-row RSS, RMSE, R² and AIC of `coef` (targets × features) on (theta, y).
+/// N_eff = N / τ per row, τ = 1 + 2 Σ_{k≥1} ρ_k the integrated autocorrelation time of the residual of
+/// `coef` (ρ_k its lag-k autocorrelation, summed while positive, up to [`MAX_LAG`]).
+pub fn effective_samples(theta: &DMatrix<f64>, y: &DMatrix<f64>, coef: &DMatrix<f64>) -> Vec<f64> {
+    let n = theta.nrows();
+    let residual = y - theta * coef.transpose();
+    (0..y.ncols())
+        .map(|t| {
+            let r = residual.column(t);
+            let mean = r.mean();
+            let var: f64 = r.iter().map(|a| (a - mean).powi(2)).sum();
+            let mut tau = 1.0;
+            if var > 0.0 {
+                for lag in 1..MAX_LAG.min(n) {
+                    let rho = (lag..n).map(|k| (r[k] - mean) * (r[k - lag] - mean)).sum::<f64>() / var;
+                    if rho <= 0.0 {
+                        break;
+                    }
+                    tau += 2.0 * rho;
+                }
+            }
+            (n as f64 / tau).max(1.0)
+        })
+        .collect()
+}
+
+/// The longest lag of the autocorrelation sum in [`effective_samples`].
+pub const MAX_LAG: usize = 200;
+
+/// Per-row RSS, RMSE, R², AIC and BIC of `coef` (targets × features) on (theta, y); the criteria
+/// use the sample counts `n_ic` (one per target; see [`SampleCount`]).
 pub fn score(
     theta: &DMatrix<f64>,
     y: &DMatrix<f64>,
     coef: &DMatrix<f64>,
     targets: &[String],
     value: f64,
+    n_ic: &[f64],
 ) -> Vec<RowFit> {
     let n = theta.nrows() as f64;
     let pred = theta * coef.transpose();
@@ -343,20 +455,21 @@ pub fn score(
                 rss,
                 rmse: (rss / n).sqrt(),
                 r2: if tss > 0.0 { 1.0 - rss / tss } else { f64::NAN },
-                aic: aic(rss, theta.nrows(), k, ms),
-                bic: aic(rss, theta.nrows(), k, ms) + (((theta.nrows() as f64).ln() - 2.0) * k as f64),
+                aic: aic(rss, theta.nrows(), n_ic[t], k, ms),
+                bic: aic(rss, theta.nrows(), n_ic[t], k, ms) + ((n_ic[t].ln() - 2.0) * k as f64),
                 sparsity: value,
+                n_ic: n_ic[t],
             }
         })
         .collect()
 }
 
-/// AIC = N ln(σ²) + 2k with σ² = max(RSS/N, 1e-24 · mean(ẋ²), f64::MIN_POSITIVE): the floor makes
-/// exact fits (RSS ≈ 0 up to rounding) tie, so the sparser one wins.
-pub fn aic(rss: f64, n: usize, k: usize, mean_square: f64) -> f64 {
-    let n = n as f64;
-    let sigma2 = (rss / n).max(1e-24 * mean_square).max(f64::MIN_POSITIVE);
-    n * sigma2.ln() + 2.0 * k as f64
+/// AIC = N_ic ln(σ²) + 2k with σ² = max(RSS/N, 1e-24 · mean(ẋ²), f64::MIN_POSITIVE) over the `n`
+/// samples and `n_ic` the sample count of the criterion ([`SampleCount`]): the floor makes exact
+/// fits (RSS ≈ 0 up to rounding) tie, so the sparser one wins.
+pub fn aic(rss: f64, n: usize, n_ic: f64, k: usize, mean_square: f64) -> f64 {
+    let sigma2 = (rss / n as f64).max(1e-24 * mean_square).max(f64::MIN_POSITIVE);
+    n_ic * sigma2.ln() + 2.0 * k as f64
 }
 
 /// Index into `sweep` chosen for each target: the minimum AIC, ties to fewer terms, then to the
@@ -447,7 +560,14 @@ fn build_provenance(
                 "criterion": options.criterion.name(),
                 "penalty_per_term": match options.criterion {
                     Criterion::Aic => "2".to_string(),
-                    Criterion::Bic => format!("ln N = {}", (samples as f64).ln()),
+                    Criterion::Bic => "ln N".to_string(),
+                },
+                "sample_count": match options.sample_count {
+                    SampleCount::Raw => json!("raw"),
+                    SampleCount::Effective => json!({
+                        "kind": "effective: N / tau, tau = 1 + 2 sum of the positive residual autocorrelations",
+                        "n": per_row(&|r| round6(r.n_ic)),
+                    }),
                 },
                 "selection": match options.selection {
                     AicSelection::PerRow => "per row: each row takes the value minimising N ln(RSS_i/N) + penalty k_i",

@@ -1,0 +1,73 @@
+//! Sweep selection that keeps the model bounded over one MPC horizon.
+//!
+//! An information criterion picks each row's sparsity on the training data alone; it cannot see
+//! that a term it keeps (say vz² in the roll row) explodes at inputs the logs never held. When the
+//! selected model fails the [`horizon_check`](super::horizon_check), rows are moved greedily to
+//! sparser sweep values: each round tries every row one sweep value sparser and keeps the move that
+//! leaves the fewest unbounded trials (ties: the smallest rise in that row's training RSS), until
+//! the model passes, or no move reduces the number of unbounded trials (then the selection is left
+//! where it was and the caller reports the failure).
+
+use super::horizon_check::{check, HorizonCheck, HorizonReport};
+use super::sindy::SindyFit;
+use crate::model::parse;
+
+/// What [`select_bounded`] did.
+#[derive(Clone, Debug)]
+pub struct BoundedSelection {
+    /// The check of the finally chosen rows.
+    pub report: HorizonReport,
+    /// Moves made: (row state, from sweep value, to sweep value).
+    pub moves: Vec<(String, f64, f64)>,
+}
+
+fn run_check(fit: &SindyFit, options: &HorizonCheck) -> Option<HorizonReport> {
+    let model = parse(&fit.to_json(), "identified model").ok()?;
+    check(&model, options)
+}
+
+/// Make `fit`'s selection pass the horizon check by moving rows to sparser sweep values (see the
+/// module docs). Returns `None` for models the check does not apply to. On return `fit` holds the
+/// final selection; `report.passed()` says whether it passes.
+pub fn select_bounded(fit: &mut SindyFit, options: &HorizonCheck) -> Option<BoundedSelection> {
+    let mut report = run_check(fit, options)?;
+    let mut moves = Vec::new();
+    // Sweep indices in increasing sparsity-parameter order.
+    let mut order: Vec<usize> = (0..fit.sweep.len()).collect();
+    order.sort_by(|&a, &b| fit.sweep[a].value.total_cmp(&fit.sweep[b].value));
+    while !report.passed() {
+        let start = fit.chosen.clone();
+        let mut best: Option<(usize, usize, f64, Vec<usize>, HorizonReport)> = None;
+        for t in 0..start.len() {
+            let pos = order.iter().position(|&j| j == start[t]).unwrap_or(0);
+            // The next sweep value that actually changes this row's support.
+            let terms = fit.sweep[start[t]].rows[t].terms;
+            let Some(&next) = order[pos + 1..].iter().find(|&&j| fit.sweep[j].rows[t].terms < terms) else {
+                continue;
+            };
+            let mut trial = start.clone();
+            trial[t] = next;
+            fit.choose(&trial);
+            let Some(r) = run_check(fit, options) else { continue };
+            let rise = fit.sweep[next].rows[t].rss - fit.sweep[start[t]].rows[t].rss;
+            let better = match &best {
+                None => true,
+                Some((_, _, best_rise, _, b)) => {
+                    r.unbounded < b.unbounded || (r.unbounded == b.unbounded && rise < *best_rise)
+                }
+            };
+            if better {
+                best = Some((t, next, rise, trial, r));
+            }
+        }
+        // Only a move that leaves fewer trials unbounded is progress.
+        let Some((t, next, _, trial, r)) = best.filter(|b| b.4.unbounded < report.unbounded) else {
+            fit.choose(&start);
+            break;
+        };
+        moves.push((fit.targets[t].clone(), fit.sweep[start[t]].value, fit.sweep[next].value));
+        fit.choose(&trial);
+        report = r;
+    }
+    Some(BoundedSelection { report, moves })
+}
