@@ -4,7 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -q -p uavgen
-uavgen=target/release/uavgen
+uavgen=${CARGO_TARGET_DIR:-target}/release/uavgen
 $uavgen --model models/pd_paper.json --horizon 30 --out generated/pd_paper
 $uavgen --model models/pd_hover.json --horizon 30 --out generated/pd_hover
 $uavgen --model models/pd_hover.json --horizon 30 --float f32 --crate-name pd_hover_f32 --out generated/pd_hover_f32

@@ -22,18 +22,16 @@ fn generic(model: &str, dt: f64, substeps: usize, horizon: usize) -> GenericMpc 
     )
 }
 
-/// The paper's trajectories (positions only; Q weighs nothing else).
+/// The paper's trajectories (positions only; Q weighs nothing else): the runtime's own formulas.
 fn trajectory(name: &str, t: f64) -> [f64; 3] {
+    use uavgen_runtime::Trajectory;
     match name {
-        "sinusoidal" => [
-            4.0 * (0.32 * t).sin() + 3.0,
-            4.0 * (0.64 * t).sin(),
-            2.0 * (0.64 * t).sin() + 6.0,
-        ],
-        "circular" => [5.0 * t.cos(), 5.0 * t.sin(), 6.0],
-        "spiral" => [(0.06 * t).exp() * t.cos(), (0.06 * t).exp() * t.sin(), 0.1 * t + 5.0],
+        "sinusoidal" => Trajectory::Sinusoidal,
+        "circular" => Trajectory::Circular,
+        "spiral" => Trajectory::Spiral,
         _ => unreachable!(),
     }
+    .position(t)
 }
 
 macro_rules! comparisons {

@@ -5,6 +5,7 @@
 //! [`discretize`] (RK4 substep choice) → [`codegen`] (one `TokenStream` per
 //! module, spliced templates, prettyplease, atomic write).
 
+pub mod analysis;
 pub mod bench;
 pub mod codegen;
 pub mod discretize;
@@ -16,9 +17,12 @@ pub mod metrics;
 pub mod model;
 pub mod mpc_options;
 pub mod reference;
+pub mod sim;
 pub mod symbolic;
+pub mod track;
 
 pub use codegen::{generate, Float, GenerateOptions, GeneratedCrate};
 pub use ir::ModelIr;
 pub use model::{load, Model};
 pub use mpc_options::MpcOptions;
+pub use sim::{Plant, PlantError, PlantFile, Profile, SimulateOptions};

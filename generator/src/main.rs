@@ -35,6 +35,10 @@ enum Command {
     Identify(cli::identify::IdentifyArgs),
     /// Evaluate a model's predictions against flight logs: one-step, horizon and whole-flight metrics.
     Evaluate(cli::evaluate::EvaluateArgs),
+    /// Simulate a flight with a plant file (vehicle, autopilot, effects) and write a flight log (docs/simulate.md).
+    Simulate(cli::simulate::SimulateArgs),
+    /// Closed-loop MPC on the plant simulator along one of the paper's trajectories (docs/track.md).
+    Track(cli::track::TrackArgs),
 }
 
 #[derive(Args)]
@@ -146,6 +150,8 @@ fn main() -> ExitCode {
         Some(Command::Bench(args)) => bench(args),
         Some(Command::Identify(args)) => cli::identify::run(args),
         Some(Command::Evaluate(args)) => cli::evaluate::run(args),
+        Some(Command::Simulate(args)) => cli::simulate::run(args),
+        Some(Command::Track(args)) => cli::track::run(args),
         None => generate(cli.generate),
     };
     match result {
@@ -254,6 +260,9 @@ fn check(args: CheckArgs) -> Result<(), String> {
         model.nx(),
         model.nu()
     );
+    for line in model.corrections_summary() {
+        println!("  {line}");
+    }
     println!(
         "  symbolic graph: {} nodes; Jacobian [∂f/∂x ∂f/∂u]: {} structural non-zeros of {}",
         ir.graph.len(),

@@ -36,7 +36,8 @@ pub struct MpcOptions {
     pub regularisation: f64,
 }
 
-/// Default weight of a state: 2 on positions x, y, z (by name), 0 elsewhere.
+/// Default weight of a state: 2 on positions x, y, z (by name), 0 elsewhere (in particular on
+/// the extra states of a model's corrections).
 fn default_q(model: &Model) -> Vec<f64> {
     model
         .states
@@ -79,11 +80,23 @@ impl MpcOptions {
     /// Defaults overridden by `file`, validated; `label` names the file in errors.
     pub fn from_file(model: &Model, file: MpcOptionsFile, label: &str) -> Result<Self, String> {
         let d = Self::defaults(model);
-        let (nx, nu) = (model.nx(), model.nu());
+        let (nx, nu, base_nx) = (model.nx(), model.nu(), model.base_nx());
         let vector = |field: &str, v: Option<Vec<f64>>, default: Vec<f64>, n: usize| -> Result<Vec<f64>, String> {
-            let v = v.unwrap_or(default);
+            let mut v = v.unwrap_or(default);
+            // State weights written for the model without its corrections: the extra states get 0.
+            if field.starts_with('q') && base_nx < nx && v.len() == base_nx {
+                v.resize(nx, 0.0);
+            }
             if v.len() != n {
-                return Err(format!("{label}: {field}: expected {n} values, found {}", v.len()));
+                let or_base = if field.starts_with('q') && base_nx < nx {
+                    format!(" (or {base_nx}: the extra states of the corrections then weigh 0)")
+                } else {
+                    String::new()
+                };
+                return Err(format!(
+                    "{label}: {field}: expected {n} values{or_base}, found {}",
+                    v.len()
+                ));
             }
             if let Some(i) = v.iter().position(|x| !x.is_finite()) {
                 return Err(format!("{label}: {field}[{i}]: non-finite value"));

@@ -1,5 +1,6 @@
 //! The real-time-iteration timeline around an [`MpcSolver`], with validation and timings.
 
+use crate::delay::{NoDelay, StatePredictor};
 use crate::reference::{ReferenceError, ReferenceSource};
 use crate::solver::{MpcSolver, Solution, Status};
 use crate::Real;
@@ -146,10 +147,18 @@ impl<R, const NU: usize> core::fmt::Display for ControlError<R, NU> {
 /// returns [`ControlErrorKind::NotPrepared`].
 ///
 /// `S` may be a `&mut` to a solver that lives elsewhere ([`MpcSolver`] is implemented for `&mut S`).
-pub struct Controller<S, Src, R, const NX: usize, const NU: usize, const N1: usize, C = NoCycleCounter> {
+///
+/// **Input delays.** With [`with_delay_compensation`](Self::with_delay_compensation) the solver
+/// solves from the state predicted over the input delays (a [`StatePredictor`], normally a
+/// [`DelayCompensator`](crate::DelayCompensator)) instead of the measured one; the controller
+/// records every input it hands out in the predictor when time advances (`prepare_next`). The
+/// default `P = NoDelay` solves from the measurement.
+pub struct Controller<S, Src, R, const NX: usize, const NU: usize, const N1: usize, C = NoCycleCounter, P = NoDelay> {
     solver: S,
     reference: Src,
     counter: C,
+    predictor: P,
+    predicted: [R; NX],
     window: [[R; NX]; N1],
     window_valid: bool,
     t0: R,
@@ -185,6 +194,8 @@ where
             solver,
             reference,
             counter,
+            predictor: NoDelay,
+            predicted: [R::ZERO; NX],
             window: [[R::ZERO; NX]; N1],
             window_valid: false,
             t0: R::ZERO,
@@ -193,6 +204,39 @@ where
             last_input: Self::neutral_input(),
             last_prepare_status: None,
             timings: Timings::default(),
+        }
+    }
+}
+
+impl<S, Src, R, C, P, const NX: usize, const NU: usize, const N1: usize> Controller<S, Src, R, NX, NU, N1, C, P>
+where
+    R: Real,
+    S: MpcSolver<R, NX, NU, N1>,
+    Src: ReferenceSource<R, NX, N1>,
+    C: CycleCounter,
+    P: StatePredictor<R, NX, NU>,
+{
+    /// The same controller, solving from the state `predictor` predicts over the input delays
+    /// (see the type's docs). Typically
+    /// `DelayCompensator::new(krate::discrete_dynamics, krate::INPUT_DELAY_SAMPLES, hover)`.
+    pub fn with_delay_compensation<P2: StatePredictor<R, NX, NU>>(
+        self,
+        predictor: P2,
+    ) -> Controller<S, Src, R, NX, NU, N1, C, P2> {
+        Controller {
+            solver: self.solver,
+            reference: self.reference,
+            counter: self.counter,
+            predictor,
+            predicted: self.predicted,
+            window: self.window,
+            window_valid: self.window_valid,
+            t0: self.t0,
+            steps: self.steps,
+            prepared: self.prepared,
+            last_input: self.last_input,
+            last_prepare_status: self.last_prepare_status,
+            timings: self.timings,
         }
     }
 
@@ -257,7 +301,9 @@ where
             });
         }
         let state_ok = x0.iter().all(|v| v.is_finite());
-        let mut solution = self.solver.feedback(x0);
+        // The state when this sample's input takes effect (x0 itself without delays).
+        self.predicted = self.predictor.predict(x0);
+        let mut solution = self.solver.feedback(&self.predicted);
         // The preparation is used up: a second feedback without prepare_next prepares again (an
         // SQP iteration at the same time).
         self.prepared = false;
@@ -332,10 +378,14 @@ where
 
     fn prepare_inner(&mut self, advance: bool) -> Result<Status, ReferenceError> {
         if advance {
+            // The input handed out for the sample that just ended was applied over it.
+            self.predictor.record(&self.last_input);
             self.solver.shift();
             self.steps = self.steps.saturating_add(1);
         }
-        let t = self.time();
+        // The solver starts from the state when this sample's input takes effect, D samples
+        // ahead: its reference window starts there too.
+        let t = self.reference_time();
         let mut window = self.window;
         let built = match self.reference.window(t, Self::DT, &mut window) {
             Ok(()) if window.iter().flatten().all(|v| v.is_finite()) => Ok(()),
@@ -372,12 +422,20 @@ where
         self.t0 + R::from_u32(self.steps) * Self::DT
     }
 
+    /// The time (s) of the first row of the reference window: t₀ + (k + D)·DT, D = the
+    /// predictor's look-ahead (the largest input delay in samples; 0 without delay compensation).
+    pub fn reference_time(&self) -> R {
+        let lead = u32::try_from(self.predictor.lookahead()).unwrap_or(u32::MAX);
+        self.t0 + R::from_u32(self.steps.saturating_add(lead)) * Self::DT
+    }
+
     /// k: samples since `start` (or construction), saturating.
     pub fn step_count(&self) -> u32 {
         self.steps
     }
 
-    /// The reference window the solver was last prepared with (rows r(t), …, r(t + N·DT)).
+    /// The reference window the solver was last prepared with (rows r(t'), …, r(t' + N·DT),
+    /// t' = [`reference_time`](Self::reference_time)).
     pub fn reference_window(&self) -> &[[R; NX]; N1] {
         &self.window
     }
@@ -391,6 +449,22 @@ where
     /// window).
     pub fn last_prepare_status(&self) -> Option<Status> {
         self.last_prepare_status
+    }
+
+    /// The state the solver was last given by `feedback`: the measurement predicted over the input
+    /// delays (the measurement itself without delay compensation); 0 before the first feedback.
+    pub fn predicted_state(&self) -> &[R; NX] {
+        &self.predicted
+    }
+
+    /// The state predictor (e.g. the [`DelayCompensator`](crate::DelayCompensator)).
+    pub fn delay_compensator(&self) -> &P {
+        &self.predictor
+    }
+
+    /// The state predictor, mutably (e.g. to `reset` its input history).
+    pub fn delay_compensator_mut(&mut self) -> &mut P {
+        &mut self.predictor
     }
 
     /// The last input `feedback` returned (initially 0 clamped into the bounds).
@@ -434,7 +508,7 @@ where
         &mut self.counter
     }
 
-    /// Take the controller apart.
+    /// Take the controller apart (the predictor is dropped).
     pub fn into_parts(self) -> (S, Src, C) {
         (self.solver, self.reference, self.counter)
     }

@@ -9,7 +9,9 @@
 //! - [`reference`](mod@reference): reference windows for the horizon — the paper's built-in trajectories
 //!   ([`Trajectory`]), a constant reference, a closure, and a time-stamped [`SetpointBuffer`];
 //! - [`Controller`]: the RTI timeline (`feedback` → apply the input → `prepare_next`), input and
-//!   output validation, and cycle-counter timings ([`CycleCounter`], [`Timings`]).
+//!   output validation, and cycle-counter timings ([`CycleCounter`], [`Timings`]);
+//! - [`DelayCompensator`](mod@delay): prediction over known input delays, so the MPC solves from
+//!   the state at which its command takes effect (an option of the [`Controller`]).
 //!
 //! ```
 //! use uavgen_runtime::{Controller, MpcSolver, Solution, Status, Trajectory};
@@ -51,11 +53,13 @@
 #![warn(missing_docs)]
 
 pub mod controller;
+pub mod delay;
 mod real;
 pub mod reference;
 pub mod solver;
 
 pub use controller::{ControlError, ControlErrorKind, Controller, CycleCounter, CycleStats, NoCycleCounter, Timings};
+pub use delay::{DelayCompensator, DelayTooLong, NoDelay, StatePredictor};
 pub use real::Real;
 pub use reference::{
     ConstantReference, FnReference, Interpolation, ReferenceError, ReferenceSource, SetpointBuffer, SetpointError,

@@ -42,6 +42,11 @@ pub const R: [Real; NU] = [0.1, 0.1, 0.1, 0.1];
 pub const U_MIN: [Real; NU] = [-5.0, -0.611, -0.611, -2.6179938779914944];
 /// Upper input bounds.
 pub const U_MAX: [Real; NU] = [5.0, 0.611, 0.611, 2.6179938779914944];
+/// Pure delay of each input in seconds (the model's `corrections.latency`; zeros when it has
+/// none). Not part of the dynamics: the runtime's delay compensator predicts over it.
+pub const INPUT_DELAY: [Real; NU] = [0.0, 0.0, 0.0, 0.0];
+/// `INPUT_DELAY` rounded to whole samples of `DT`.
+pub const INPUT_DELAY_SAMPLES: [usize; NU] = [0, 0, 0, 0];
 /// Hard cap on active-set iterations per QP.
 pub const MAX_QP_ITERATIONS: usize = 200;
 /// Added to the diagonal of the condensed Hessian.

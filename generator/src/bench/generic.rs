@@ -26,16 +26,9 @@ impl Lcg {
     }
 }
 
+/// The paper's trajectories in the benchmark's order (sinusoid, circle, spiral): the runtime's own.
 fn trajectory(which: usize, t: f64) -> [f64; 3] {
-    match which {
-        0 => [
-            4.0 * (0.32 * t).sin() + 3.0,
-            4.0 * (0.64 * t).sin(),
-            2.0 * (0.64 * t).sin() + 6.0,
-        ],
-        1 => [5.0 * t.cos(), 5.0 * t.sin(), 6.0],
-        _ => [(0.06 * t).exp() * t.cos(), (0.06 * t).exp() * t.sin(), 0.1 * t + 5.0],
-    }
+    uavgen_runtime::Trajectory::ALL[which.min(2)].position(t)
 }
 
 /// Time `steps` generic RTI steps on each of the 3 trajectories.

@@ -14,3 +14,5 @@ pub fn write_atomically(path: &Path, text: &str) -> Result<(), String> {
     })
 }
 pub mod evaluate;
+pub mod simulate;
+pub mod track;

@@ -159,8 +159,11 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
     let head = header::lines(model, options, substeps, &mpc);
     let rs_header = header::rust(&head);
 
-    let dims = splice::specialise_dims(options.float.name(), &lib_rs::dims_values(&ir, options, substeps, &mpc))
-        .map_err(GenerateError::Template)?;
+    let dims = splice::specialise_dims(
+        options.float.name(),
+        &lib_rs::dims_values(&ir, options, substeps, &mpc, &model.input_delays()),
+    )
+    .map_err(GenerateError::Template)?;
     let (model_tokens, used_math) = model_rs::emit(&ir, options.float);
     let mut files = vec![
         (

@@ -1,11 +1,14 @@
 //! The operating envelope over which the substep count is chosen.
 
+use crate::model::corrections::{FLIGHT_TIME, LAGGED_SUFFIX};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
 
-/// Symmetric bounds per state and input, looked up by the standard names of
-/// `LOG_FORMAT.md`; other names get ±`default_bound`.
+/// Bounds per state and input, looked up by the standard names of
+/// `LOG_FORMAT.md`; other names get ±`default_bound`. The extra states of a
+/// model's `corrections` have their own: `flight_time` ranges over
+/// 0..`flight_time` s, and `<input>_lagged` over the bounds of `<input>`.
 #[derive(Clone, Debug)]
 pub struct Envelope {
     pub position: f64,
@@ -15,6 +18,8 @@ pub struct Envelope {
     /// |u| bounds: u_vz, u_roll, u_pitch, u_yaw_rate (the MPC's default bounds).
     pub inputs: [f64; 4],
     pub default_bound: f64,
+    /// Upper end of `flight_time` (s); it starts at 0.
+    pub flight_time: f64,
     pub samples: usize,
     pub seed: u64,
 }
@@ -28,6 +33,7 @@ impl Default for Envelope {
             angular_rate: 3.0,
             inputs: [5.0, 0.611, 0.611, 5.0 * PI / 6.0],
             default_bound: 1.0,
+            flight_time: 600.0,
             samples: 512,
             seed: 0,
         }
@@ -35,6 +41,18 @@ impl Default for Envelope {
 }
 
 impl Envelope {
+    /// The range [lo, hi] of the variable `name`.
+    fn range(&self, name: &str) -> (f64, f64) {
+        if name == FLIGHT_TIME {
+            return (0.0, self.flight_time);
+        }
+        let b = match name.strip_suffix(LAGGED_SUFFIX) {
+            Some(input) => self.bound(input),
+            None => self.bound(name),
+        };
+        (-b, b)
+    }
+
     fn bound(&self, name: &str) -> f64 {
         match name {
             "x" | "y" | "z" => self.position,
@@ -53,11 +71,11 @@ impl Envelope {
     /// The hover point (all zero) followed by `samples` uniform random points,
     /// each a vector over `names` (states then inputs). Deterministic.
     pub fn points(&self, names: &[String]) -> Vec<Vec<f64>> {
-        let bounds: Vec<f64> = names.iter().map(|n| self.bound(n)).collect();
+        let ranges: Vec<(f64, f64)> = names.iter().map(|n| self.range(n)).collect();
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let mut points = vec![vec![0.0; names.len()]];
         for _ in 0..self.samples {
-            points.push(bounds.iter().map(|&b| rng.gen_range(-b..=b)).collect());
+            points.push(ranges.iter().map(|&(lo, hi)| rng.gen_range(lo..=hi)).collect());
         }
         points
     }

@@ -12,7 +12,11 @@
 //! A prediction that is not finite or exceeds [`DIVERGENCE_BOUND`] in magnitude ends its run
 //! (reported as `diverged_at`); metrics are computed over the finite part. Yaw errors are
 //! wrapped to (−π, π].
+//!
+//! A model with `corrections` is run on its full state (the extra states start from the log, see
+//! `inputs.rs`) and sees each input delayed by its latency; it is scored on the 12 logged states.
 
+mod inputs;
 mod plot;
 
 pub use plot::{plot_states, write_svg, PlotKind};
@@ -23,6 +27,7 @@ use crate::ir::ModelIr;
 use crate::logs::{median, FlightLog, Segment, YAW};
 use crate::metrics::{compare, Metrics, MetricsError};
 use crate::model::Model;
+use inputs::{logged, ModelInputs};
 use serde::Serialize;
 use std::fmt;
 
@@ -64,7 +69,7 @@ impl Default for EvaluateOptions {
 /// Why an evaluation could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum EvaluateError {
-    #[error("model `{model}` has {nx} states and {nu} inputs, but flight logs have 12 states and 4 inputs")]
+    #[error("model `{model}` has {nx} states (besides the extra states of its corrections) and {nu} inputs, but flight logs have 12 states and 4 inputs")]
     Dimensions { model: String, nx: usize, nu: usize },
     #[error("no logs to evaluate")]
     NoLogs,
@@ -354,10 +359,10 @@ struct Stepper {
 
 impl Stepper {
     fn new(model: &Model, options: &EvaluateOptions) -> Result<Self, EvaluateError> {
-        if model.nx() != NX || model.nu() != NU {
+        if model.base_nx() != NX || model.nu() != NU {
             return Err(EvaluateError::Dimensions {
                 model: model.name.clone(),
-                nx: model.nx(),
+                nx: model.base_nx(),
                 nu: model.nu(),
             });
         }
@@ -393,16 +398,34 @@ impl Stepper {
         Ok(m)
     }
 
-    /// F(x, u), or `None` if the result diverged.
-    fn step(&self, x: &[f64; NX], u: &[f64; NU], dt: f64, m: usize) -> Option<[f64; NX]> {
+    /// F(x, u) over the model's full state, or `None` if the result diverged.
+    fn step(&self, x: &[f64], u: &[f64; NU], dt: f64, m: usize) -> Option<Vec<f64>> {
         let next = discrete_step(&self.ir, x, u, dt, m);
-        if !finite(&next) {
-            return None;
-        }
-        let mut out = [0.0; NX];
-        out.copy_from_slice(&next);
-        Some(out)
+        finite(&next).then_some(next)
     }
+}
+
+/// The model's inputs for the one-step derivative check of a dataset segment, and the index of
+/// the segment's first sample in them. Without a low-pass they are computed over the whole logged
+/// segment (so delays and lag states see the samples the dataset trimmed); with one, over the
+/// dataset's filtered series itself.
+fn derivative_inputs(
+    model: &Model,
+    log: &FlightLog,
+    seg: &crate::identify::dataset::SegmentData,
+    options: &EvaluateOptions,
+) -> (ModelInputs, usize) {
+    let raw = log.segments.get(seg.segment);
+    if options.dataset.lowpass.is_none() {
+        if let Some(raw) = raw {
+            let dt = segment_dt(raw).unwrap_or(seg.dt);
+            if let Some(offset) = raw.t.iter().position(|&t| Some(&t) == seg.t.first()) {
+                return (ModelInputs::new(model, &raw.t, &raw.u, raw.t[0], dt), offset);
+            }
+        }
+    }
+    let t_start = raw.map_or(seg.t[0], |r| r.t[0]);
+    (ModelInputs::new(model, &seg.t, &seg.u, t_start, seg.dt), 0)
 }
 
 /// The segment's median sample period, or `None` for a single sample.
@@ -413,11 +436,15 @@ fn segment_dt(seg: &Segment) -> Option<f64> {
 
 /// The whole-flight free run of a segment: predictions for samples 0.. (sample 0 is the
 /// measured initial state) up to, not including, the first diverged sample.
-fn free_run(st: &Stepper, seg: &Segment, dt: f64, m: usize) -> (Vec<[f64; NX]>, Option<usize>) {
+fn free_run(st: &Stepper, seg: &Segment, inputs: &ModelInputs, dt: f64, m: usize) -> (Vec<[f64; NX]>, Option<usize>) {
     let mut out = vec![seg.x[0]];
+    let mut x = inputs.state(&seg.x[0], 0);
     for k in 0..seg.len() - 1 {
-        match st.step(&out[k], &seg.u[k], dt, m) {
-            Some(x) => out.push(x),
+        match st.step(&x, &inputs.u[k], dt, m) {
+            Some(next) => {
+                out.push(logged(&next));
+                x = next;
+            }
             None => return (out, Some(k + 1)),
         }
     }
@@ -425,13 +452,21 @@ fn free_run(st: &Stepper, seg: &Segment, dt: f64, m: usize) -> (Vec<[f64; NX]>, 
 }
 
 /// A horizon run from sample k: predictions for k+1..=k+len (fewer if it diverged).
-fn horizon_run(st: &Stepper, seg: &Segment, k: usize, len: usize, dt: f64, m: usize) -> Vec<[f64; NX]> {
+fn horizon_run(
+    st: &Stepper,
+    seg: &Segment,
+    inputs: &ModelInputs,
+    k: usize,
+    len: usize,
+    dt: f64,
+    m: usize,
+) -> Vec<[f64; NX]> {
     let mut out = Vec::with_capacity(len);
-    let mut x = seg.x[k];
+    let mut x = inputs.state(&seg.x[k], k);
     for j in 0..len {
-        match st.step(&x, &seg.u[k + j], dt, m) {
+        match st.step(&x, &inputs.u[k + j], dt, m) {
             Some(next) => {
-                out.push(next);
+                out.push(logged(&next));
                 x = next;
             }
             None => break,
@@ -447,7 +482,7 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
         return Err(EvaluateError::NoLogs);
     }
     let mut st = Stepper::new(model, options)?;
-    let names = model.states.clone();
+    let names = model.base_states().to_vec();
     let h = options.horizon;
     let dataset = match build(logs, &options.dataset) {
         Ok(d) => Some(d),
@@ -461,9 +496,10 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
         let mut acc = Acc::new(h);
         // 1a. One-step derivative on the dataset's (possibly filtered, trimmed) samples.
         for seg in dataset.iter().flat_map(|d| &d.segments).filter(|s| s.log == li) {
-            for ((x, u), dx) in seg.x.iter().zip(&seg.u).zip(&seg.dx) {
+            let (inputs, offset) = derivative_inputs(model, log, seg, options);
+            for (j, (x, dx)) in seg.x.iter().zip(&seg.dx).enumerate() {
                 acc.derivative_made += 1;
-                let f = st.ir.eval_f(x, u);
+                let f = st.ir.eval_f(&inputs.state(x, offset + j), &inputs.u[offset + j]);
                 if finite(&f) {
                     acc.derivative.push(&f[DYNAMIC_STATES], &dx[DYNAMIC_STATES], None);
                 }
@@ -476,18 +512,19 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
                 continue;
             };
             let m = st.substeps(dt, &log.source, si)?;
+            let inputs = ModelInputs::new(model, &seg.t, &seg.u, seg.t[0], dt);
             // 1b. One-step next sample.
             for k in 0..n - 1 {
                 acc.next_made += 1;
-                if let Some(p) = st.step(&seg.x[k], &seg.u[k], dt, m) {
-                    acc.next.push(&p, &seg.x[k + 1], Some(YAW));
+                if let Some(p) = st.step(&inputs.state(&seg.x[k], k), &inputs.u[k], dt, m) {
+                    acc.next.push(&p[..NX], &seg.x[k + 1], Some(YAW));
                 }
             }
             // 2. Horizon free runs from every sample with a full horizon after it.
             let (mut runs, mut diverged, mut first_diverged) = (0, 0, None);
             for k in 0..n.saturating_sub(h) {
                 runs += 1;
-                let pred = horizon_run(&st, seg, k, h, dt, m);
+                let pred = horizon_run(&st, seg, &inputs, k, h, dt, m);
                 for (j, p) in pred.iter().enumerate() {
                     acc.horizon.push(p, &seg.x[k + j + 1], Some(YAW));
                     acc.steps.add(j, p, &seg.x[k + j + 1]);
@@ -502,7 +539,7 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
             acc.horizon_runs += runs;
             acc.horizon_diverged += diverged;
             // 3. Whole-flight free run.
-            let (pred, diverged_at) = free_run(&st, seg, dt, m);
+            let (pred, diverged_at) = free_run(&st, seg, &inputs, dt, m);
             let mut pool = Pool::default();
             for k in 1..pred.len() {
                 pool.push(&pred[k], &seg.x[k], Some(YAW));
@@ -577,13 +614,14 @@ pub fn traces(model: &Model, log: &FlightLog, options: &EvaluateOptions) -> Resu
             continue;
         };
         let m = st.substeps(dt, &log.source, si)?;
-        let (free_run, diverged_at) = free_run(&st, seg, dt, m);
+        let inputs = ModelInputs::new(model, &seg.t, &seg.u, seg.t[0], dt);
+        let (free_run, diverged_at) = free_run(&st, seg, &inputs, dt, m);
         let horizon_runs = (0..seg.len() - 1)
             .step_by(h)
             .map(|k| {
                 let len = h.min(seg.len() - 1 - k);
                 let mut run = vec![seg.x[k]];
-                run.extend(horizon_run(&st, seg, k, len, dt, m));
+                run.extend(horizon_run(&st, seg, &inputs, k, len, dt, m));
                 (k, run)
             })
             .collect();

@@ -65,7 +65,7 @@ pub fn plot_states(
                 "{} on {}{}: measured (black) vs predicted (red), {}",
                 model.name, stem, seg, what
             );
-            write_svg(tr, &model.states, &title, kind, &path)?;
+            write_svg(tr, model.base_states(), &title, kind, &path)?;
             files.push(path);
         }
     }

@@ -3,10 +3,11 @@
 //! An information criterion picks each row's sparsity on the training data alone; it cannot see
 //! that a term it keeps (say vz² in the roll row) explodes at inputs the logs never held. When the
 //! selected model fails the [`horizon_check`](super::horizon_check), rows are moved greedily to
-//! sparser sweep values: each round tries every row one sweep value sparser and keeps the move that
-//! leaves the fewest unbounded trials (ties: the smallest rise in that row's training RSS), until
-//! the model passes, or no move reduces the number of unbounded trials (then the selection is left
-//! where it was and the caller reports the failure).
+//! sparser sweep values: each round tries every row at every sparser sweep value (that changes its
+//! support and leaves it non-empty) and keeps the move that leaves the fewest unbounded trials (ties: the smallest rise in that row's training RSS), until
+//! the model passes, or every possible move leaves more trials unbounded, or no row can be made
+//! sparser without emptying it (then the caller reports the failure). Every move removes terms, so
+//! the search ends.
 
 use super::horizon_check::{check, HorizonCheck, HorizonReport};
 use super::sindy::SindyFit;
@@ -40,28 +41,34 @@ pub fn select_bounded(fit: &mut SindyFit, options: &HorizonCheck) -> Option<Boun
         let mut best: Option<(usize, usize, f64, Vec<usize>, HorizonReport)> = None;
         for t in 0..start.len() {
             let pos = order.iter().position(|&j| j == start[t]).unwrap_or(0);
-            // The next sweep value that actually changes this row's support.
             let terms = fit.sweep[start[t]].rows[t].terms;
-            let Some(&next) = order[pos + 1..].iter().find(|&&j| fit.sweep[j].rows[t].terms < terms) else {
-                continue;
-            };
-            let mut trial = start.clone();
-            trial[t] = next;
-            fit.choose(&trial);
-            let Some(r) = run_check(fit, options) else { continue };
-            let rise = fit.sweep[next].rows[t].rss - fit.sweep[start[t]].rows[t].rss;
-            let better = match &best {
-                None => true,
-                Some((_, _, best_rise, _, b)) => {
-                    r.unbounded < b.unbounded || (r.unbounded == b.unbounded && rise < *best_rise)
+            // Every sparser sweep value that changes this row's support, but never to an empty
+            // row (a row without terms is no model of that state).
+            let mut seen = terms;
+            for &next in &order[pos + 1..] {
+                let k = fit.sweep[next].rows[t].terms;
+                if k == 0 || k >= seen {
+                    continue;
                 }
-            };
-            if better {
-                best = Some((t, next, rise, trial, r));
+                seen = k;
+                let mut trial = start.clone();
+                trial[t] = next;
+                fit.choose(&trial);
+                let Some(r) = run_check(fit, options) else { continue };
+                let rise = fit.sweep[next].rows[t].rss - fit.sweep[start[t]].rows[t].rss;
+                let better = match &best {
+                    None => true,
+                    Some((_, _, best_rise, _, b)) => {
+                        r.unbounded < b.unbounded || (r.unbounded == b.unbounded && rise < *best_rise)
+                    }
+                };
+                if better {
+                    best = Some((t, next, rise, trial, r));
+                }
             }
         }
-        // Only a move that leaves fewer trials unbounded is progress.
-        let Some((t, next, _, trial, r)) = best.filter(|b| b.4.unbounded < report.unbounded) else {
+        // A move must not leave more trials unbounded; every move removes terms, so this ends.
+        let Some((t, next, _, trial, r)) = best.filter(|b| b.4.unbounded <= report.unbounded) else {
             fit.choose(&start);
             break;
         };

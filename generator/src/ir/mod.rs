@@ -1,5 +1,6 @@
 //! The symbolic model IR: ẋ = f(x, u) as a DAG, with its Jacobians.
 
+pub mod corrections;
 pub mod pd;
 mod sindy;
 
@@ -7,7 +8,8 @@ use crate::model::{Dynamics, Model};
 use crate::symbolic::{jacobian, Graph, Id, Tape};
 
 /// A model lowered to the symbolic graph. Graph variables are the states
-/// (0..NX) followed by the inputs (NX..NX+NU).
+/// (0..NX) followed by the inputs (NX..NX+NU). For a model with `corrections`
+/// the states include the extra states (see [`corrections`]).
 pub struct ModelIr {
     pub graph: Graph,
     pub nx: usize,
@@ -28,11 +30,21 @@ impl ModelIr {
     pub fn new(model: &Model) -> Self {
         let mut graph = Graph::new();
         let vars: Vec<Id> = model.variables().iter().map(|n| graph.var(n)).collect();
-        let f = match &model.dynamics {
-            Dynamics::Pd(p) => pd::dynamics(&mut graph, &vars, p),
-            Dynamics::Sindy(s) => sindy::dynamics(&mut graph, &vars, s),
-        };
         let (nx, nu) = (model.nx(), model.nu());
+        // The base model sees its own states and the effective inputs (lag states for lagged inputs).
+        let base_vars: Vec<Id> = vars[..model.base_nx()]
+            .iter()
+            .copied()
+            .chain(corrections::effective_inputs(model, &vars))
+            .collect();
+        let base = match &model.dynamics {
+            Dynamics::Pd(p) => pd::dynamics(&mut graph, &base_vars, p),
+            Dynamics::Sindy(s) => sindy::dynamics(&mut graph, &base_vars, s),
+        };
+        let f = match &model.corrections {
+            Some(c) => corrections::apply(&mut graph, model, c, &vars, base),
+            None => base,
+        };
         let all: Vec<usize> = (0..nx + nu).collect();
         let jac = jacobian(&mut graph, &f, &all);
         let fx: Vec<Vec<Id>> = jac.iter().map(|r| r[..nx].to_vec()).collect();

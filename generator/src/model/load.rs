@@ -3,7 +3,7 @@
 use super::error::{ModelError, ModelErrorKind as K};
 use super::file::{PdFile, SindyFile, DEFAULT_INPUTS, DEFAULT_STATES, FORMAT};
 use super::term::{parse_term, TermError};
-use super::{Dynamics, Model, PdParams, Row, SindySpec, Source};
+use super::{Corrections, Dynamics, Model, PdParams, Row, SindySpec, Source};
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 use sha2::{Digest, Sha256};
@@ -26,9 +26,9 @@ pub fn load(path: &Path) -> Result<Model, ModelError> {
 
 /// Validate model text; `label` names the file in errors.
 pub fn parse(text: &str, label: &str) -> Result<Model, ModelError> {
-    let value: Value = serde_json::from_str(text).map_err(|e| json_syntax_error(text, label, &e))?;
+    let mut value: Value = serde_json::from_str(text).map_err(|e| json_syntax_error(text, label, &e))?;
     let obj = value
-        .as_object()
+        .as_object_mut()
         .ok_or_else(|| ModelError::new(label, "", K::Json, "the top level must be a JSON object"))?;
     match obj.get("format") {
         None => {
@@ -53,21 +53,43 @@ pub fn parse(text: &str, label: &str) -> Result<Model, ModelError> {
         file: label.to_owned(),
         sha256: hex_sha256(text.as_bytes()),
     };
-    match obj.get("kind") {
+    // The corrections block belongs to every kind and is read on its own, after the kind's schema.
+    let corrections = obj.remove("corrections");
+    match obj.get("kind").cloned() {
         None => Err(ModelError::new(
             label,
             "kind",
             K::MissingField,
             "missing field `kind` (\"pd\" or \"sindy\")",
         )),
-        Some(Value::String(k)) if k == "pd" => validate_pd(typed::<PdFile>(value, label)?, label, source),
-        Some(Value::String(k)) if k == "sindy" => validate_sindy(typed::<SindyFile>(value, label)?, label, source),
+        Some(Value::String(k)) if k == "pd" => {
+            let file = typed::<PdFile>(value, label, "")?;
+            validate_pd(file, corrections_schema(corrections, label)?, label, source)
+        }
+        Some(Value::String(k)) if k == "sindy" => {
+            let file = typed::<SindyFile>(value, label, "")?;
+            validate_sindy(file, corrections_schema(corrections, label)?, label, source)
+        }
         Some(other) => Err(ModelError::new(
             label,
             "kind",
             K::UnknownKind,
             format!("unknown kind {other}: expected \"pd\" or \"sindy\""),
         )),
+    }
+}
+
+fn corrections_schema(value: Option<Value>, label: &str) -> Result<Option<Corrections>, ModelError> {
+    match value {
+        None => Ok(None),
+        // serde would also read a struct from an array, by position: only objects are allowed.
+        Some(v) if !v.is_object() => Err(ModelError::new(
+            label,
+            "corrections",
+            K::BadValue,
+            format!("expected an object, found {v}"),
+        )),
+        Some(v) => typed::<Corrections>(v, label, "corrections").map(Some),
     }
 }
 
@@ -99,10 +121,16 @@ pub(crate) fn json_syntax_error(text: &str, label: &str, e: &serde_json::Error) 
     ModelError::new(label, at, K::Json, format!("invalid JSON: {msg}"))
 }
 
-fn typed<T: DeserializeOwned>(value: Value, label: &str) -> Result<T, ModelError> {
+/// Deserialise `value` into the schema `T`; errors carry the JSON path below `prefix`.
+fn typed<T: DeserializeOwned>(value: Value, label: &str, prefix: &str) -> Result<T, ModelError> {
     serde_path_to_error::deserialize::<_, T>(value).map_err(|e| {
         let path = e.path().to_string();
-        let inner = e.into_inner().to_string();
+        let mut inner = e.into_inner().to_string();
+        let top_level = prefix.is_empty() && !path.contains(['.', '[']);
+        if top_level && inner.starts_with("unknown field") && inner.contains("expected one of") {
+            // `corrections` is valid at the top level of every kind but read separately.
+            inner.push_str(", `corrections`");
+        }
         let kind = if inner.starts_with("missing field") {
             K::MissingField
         } else if inner.starts_with("unknown field") {
@@ -110,7 +138,12 @@ fn typed<T: DeserializeOwned>(value: Value, label: &str) -> Result<T, ModelError
         } else {
             K::BadValue
         };
-        let path = if path == "." { String::new() } else { path };
+        let path = match (path.as_str(), prefix) {
+            (".", _) => prefix.to_string(),
+            (_, "") => path,
+            (_, _) if path.starts_with('[') => format!("{prefix}{path}"),
+            _ => format!("{prefix}.{path}"),
+        };
         ModelError::new(label, path, kind, inner)
     })
 }
@@ -188,7 +221,7 @@ fn names(
     Ok((states, inputs))
 }
 
-fn validate_pd(f: PdFile, label: &str, source: Source) -> Result<Model, ModelError> {
+fn validate_pd(f: PdFile, corrections: Option<Corrections>, label: &str, source: Source) -> Result<Model, ModelError> {
     let (states, inputs) = names(label, f.states, f.inputs, true)?;
     let mass = finite(label, "mass", f.mass)?;
     let gravity = finite(label, "gravity", f.gravity)?;
@@ -280,14 +313,28 @@ fn validate_pd(f: PdFile, label: &str, source: Source) -> Result<Model, ModelErr
     if p.xi(12) < 0.0 {
         return Err(ModelError::new(label, loc(12), K::BadValue, format!("ξ12 = {} < 0: M(Ω) + diag(0, 0, ξ12) becomes singular at attitudes where M(Ω) is not (yaw acceleration feedback must be ≥ 0)", p.xi(12))));
     }
-    Ok(Model {
-        name: name(label, f.name)?,
+    let base = Model {
+        name: f.name,
         states,
         inputs,
         provenance: f.provenance,
         dynamics: Dynamics::Pd(p),
+        corrections: None,
         source,
-    })
+    };
+    finish(base, corrections, label)
+}
+
+/// The last checks, common to every kind: the corrections block (whose extra states are appended
+/// to the states), then the name.
+fn finish(mut model: Model, corrections: Option<Corrections>, label: &str) -> Result<Model, ModelError> {
+    if let Some(c) = &corrections {
+        c.validate(label, &model.states, &model.inputs)?;
+        model.states.extend(c.extra_states(&model.inputs));
+    }
+    model.corrections = corrections;
+    model.name = name(label, std::mem::take(&mut model.name))?;
+    Ok(model)
 }
 
 fn number(label: &str, loc: &str, v: &Value) -> Result<f64, ModelError> {
@@ -317,7 +364,12 @@ fn term_error(label: &str, loc: String, text: &str, e: TermError) -> ModelError 
     ModelError::new(label, loc, kind, format!("{e} in term '{text}'"))
 }
 
-fn validate_sindy(f: SindyFile, label: &str, source: Source) -> Result<Model, ModelError> {
+fn validate_sindy(
+    f: SindyFile,
+    corrections: Option<Corrections>,
+    label: &str,
+    source: Source,
+) -> Result<Model, ModelError> {
     let (states, inputs) = names(label, f.states, f.inputs, false)?;
     let vars: Vec<String> = states.iter().chain(&inputs).cloned().collect();
     let state_index = |loc: String, s: &str| {
@@ -413,12 +465,14 @@ fn validate_sindy(f: SindyFile, label: &str, source: Source) -> Result<Model, Mo
             })
         })
         .collect();
-    Ok(Model {
-        name: name(label, f.name)?,
+    let base = Model {
+        name: f.name,
         states,
         inputs,
         provenance: f.provenance,
         dynamics: Dynamics::Sindy(SindySpec { library, rows }),
+        corrections: None,
         source,
-    })
+    };
+    finish(base, corrections, label)
 }

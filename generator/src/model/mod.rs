@@ -4,14 +4,23 @@
 //! line and column; JSON's missing NaN/Infinity is reported as a non-finite
 //! number), then `format` and `kind` are checked and the value is
 //! deserialised into the schema of its kind (errors carry the JSON path), and
-//! finally the semantic checks run (names, terms, counts, duplicates).
+//! finally the semantic checks run (names, terms, counts, duplicates), and those of the optional
+//! `corrections` block ([`Corrections`]).
+//!
+//! **States of a corrected model.** After loading, [`Model::states`] is the full state vector:
+//! the file's states, then the extra states of the corrections (`<input>_lagged` in input order,
+//! then `flight_time`). Everything downstream (IR, discretisation, code generation, MPC options)
+//! therefore sees one state vector; [`Model::base_states`] is the file's part (the 12 logged
+//! states for a corrected model).
 
+pub mod corrections;
 mod error;
 pub mod file;
 mod load;
 pub mod pysindy;
 pub mod term;
 
+pub use corrections::{attach as attach_corrections, Corrections, Drag, GroundEffect, ThrustDecay};
 pub use error::{ModelError, ModelErrorKind};
 pub use file::{Coefficient, PdFile, SindyFile, DEFAULT_INPUTS, DEFAULT_STATES, FORMAT};
 pub use load::{load, parse};
@@ -28,10 +37,13 @@ pub struct Source {
 #[derive(Clone, Debug)]
 pub struct Model {
     pub name: String,
+    /// All states: the file's, then the extra states of [`Model::corrections`].
     pub states: Vec<String>,
     pub inputs: Vec<String>,
     pub provenance: serde_json::Value,
     pub dynamics: Dynamics,
+    /// The validated `corrections` block, if the file has one.
+    pub corrections: Option<Corrections>,
     pub source: Source,
 }
 
@@ -83,6 +95,31 @@ impl Model {
     /// States then inputs: the variable order of the symbolic graph.
     pub fn variables(&self) -> Vec<String> {
         self.states.iter().chain(&self.inputs).cloned().collect()
+    }
+    /// Number of states the file declares (without the extra states of the corrections).
+    pub fn base_nx(&self) -> usize {
+        let extra = self
+            .corrections
+            .as_ref()
+            .map_or(0, |c| c.extra_states(&self.inputs).len());
+        self.states.len() - extra
+    }
+    /// The states the file declares, without the extra states of the corrections.
+    pub fn base_states(&self) -> &[String] {
+        &self.states[..self.base_nx()]
+    }
+    /// The pure delay of each input in s, in input order (zeros without `corrections.latency`).
+    pub fn input_delays(&self) -> Vec<f64> {
+        self.inputs
+            .iter()
+            .map(|u| self.corrections.as_ref().map_or(0.0, |c| c.delay(u)))
+            .collect()
+    }
+    /// `uavgen check`'s description of the corrections: one line per effect; empty without them.
+    pub fn corrections_summary(&self) -> Vec<String> {
+        self.corrections
+            .as_ref()
+            .map_or_else(Vec::new, |c| c.summary(&self.inputs))
     }
     pub fn kind_name(&self) -> &'static str {
         match self.dynamics {

@@ -79,7 +79,7 @@ impl Differentiator {
                 let cp = g.mul(c, p);
                 g.mul(cp, da)
             }
-            // d sin a = cos a · da ; d cos a = −sin a · da
+            // d sin a = cos a · da ; d cos a = −sin a · da ; d √a = da / (2 √a)
             Node::Call(func, a) => {
                 let da = self.d(a);
                 if g.is_zero(da) {
@@ -94,6 +94,12 @@ impl Differentiator {
                         let s = g.sin(a);
                         let t = g.mul(s, da);
                         g.neg(t)
+                    }
+                    Func::Sqrt => {
+                        let half = g.constant(0.5);
+                        let r = g.recip(id);
+                        let t = g.mul(half, r);
+                        g.mul(t, da)
                     }
                 }
             }

@@ -3,7 +3,7 @@
 //! The emitter walks the DAG in topological order and binds every non-leaf
 //! node it needs to a fresh `tN` local exactly once, so the emitted code
 //! inherits the graph's common-subexpression elimination. Constants and
-//! variables are inlined. Math functions resolve to `sin`, `cos` and `powi`
+//! variables are inlined. Math functions resolve to `sin`, `cos`, `sqrt` and `powi`
 //! in scope at the call site (the spliced `math` module of the generated crate).
 
 use super::expr::{Func, Graph, Id, Node};
@@ -88,7 +88,7 @@ impl<'g> Emitter<'g> {
         std::mem::take(&mut self.statements)
     }
 
-    /// Names of the math functions (`sin`, `cos`, `powi`) the statements call.
+    /// Names of the math functions (`sin`, `cos`, `sqrt`, `powi`) the statements call.
     pub fn used_functions(&self) -> &BTreeSet<&'static str> {
         &self.used_functions
     }
@@ -143,6 +143,11 @@ impl<'g> Emitter<'g> {
                 let a = self.get(a);
                 self.used_functions.insert("cos");
                 quote!(cos(#a))
+            }
+            Node::Call(Func::Sqrt, a) => {
+                let a = self.get(a);
+                self.used_functions.insert("sqrt");
+                quote!(sqrt(#a))
             }
         };
         let name = format_ident!("{}{}", self.prefix, self.next);

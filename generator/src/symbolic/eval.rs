@@ -16,6 +16,7 @@ enum Op {
     Powi(usize, i32),
     Sin(usize),
     Cos(usize),
+    Sqrt(usize),
 }
 
 /// Flattened evaluation program for a set of output expressions.
@@ -44,6 +45,7 @@ impl Tape {
                 Node::Powi(a, n) => Op::Powi(s(a), n),
                 Node::Call(Func::Sin, a) => Op::Sin(s(a)),
                 Node::Call(Func::Cos, a) => Op::Cos(s(a)),
+                Node::Call(Func::Sqrt, a) => Op::Sqrt(s(a)),
             });
         }
         let outputs = outputs.iter().map(|o| slot[o.index()]).collect();
@@ -73,6 +75,7 @@ impl Tape {
                 Op::Powi(a, n) => v[a].powi(n),
                 Op::Sin(a) => v[a].sin(),
                 Op::Cos(a) => v[a].cos(),
+                Op::Sqrt(a) => v[a].sqrt(),
             };
             v.push(value);
         }
@@ -104,6 +107,26 @@ mod tests {
         assert!((out[0] - (xv * xv * yv.sin() + 1.0 / xv)).abs() < 1e-15);
         assert!((out[1] - (2.0 * xv * yv.sin() - 1.0 / (xv * xv))).abs() < 1e-15);
         assert!((out[2] - (xv * xv * yv.cos())).abs() < 1e-15);
+    }
+
+    #[test]
+    fn square_root_and_its_derivative() {
+        // e = √(x² + 1) ; ∂e/∂x = x / √(x² + 1)
+        let mut g = Graph::new();
+        let x = g.var("x");
+        let x2 = g.powi(x, 2);
+        let one = g.one();
+        let a = g.add(x2, one);
+        let e = g.sqrt(a);
+        let dx = diff(&mut g, e, 0);
+        let tape = Tape::new(&g, &[e, dx]);
+        let xv = 0.75_f64;
+        let out = tape.eval(&[xv]);
+        assert_eq!(out[0], 1.25);
+        assert!((out[1] - 0.6).abs() < 1e-15);
+        let four = g.constant(4.0);
+        let two = g.sqrt(four);
+        assert_eq!(g.as_const(two), Some(2.0), "constants fold");
     }
 
     #[test]

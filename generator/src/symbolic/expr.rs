@@ -24,6 +24,8 @@ impl Id {
 pub enum Func {
     Sin,
     Cos,
+    /// √a (used by the quadratic-drag correction, always of a positive argument).
+    Sqrt,
 }
 
 /// One node of the DAG. Constants are stored by bit pattern so they hash.
@@ -231,6 +233,14 @@ impl Graph {
             return self.constant(x.cos());
         }
         self.intern(Node::Call(Func::Cos, a))
+    }
+
+    /// √a
+    pub fn sqrt(&mut self, a: Id) -> Id {
+        if let Some(x) = self.as_const(a) {
+            return self.constant(x.sqrt());
+        }
+        self.intern(Node::Call(Func::Sqrt, a))
     }
 
     /// Σ terms (empty sum = 0)

@@ -1,0 +1,197 @@
+//! `uavgen track`: closed-loop MPC on the plant simulator (docs/track.md).
+
+use clap::{Args, ValueEnum};
+use std::path::{Path, PathBuf};
+use uavgen::codegen::GenerateOptions;
+use uavgen::sim::PlantFile;
+use uavgen::track::{self, Backend, GenericBackend, HarnessBackend, TrackOptions, TrackReport};
+use uavgen_runtime::Trajectory;
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
+pub enum TrajectoryArg {
+    /// x = 5 cos t, y = 5 sin t, z = 6.
+    Circle,
+    /// x = 4 sin(0.32 t) + 3, y = 4 sin(0.64 t), z = 2 sin(0.64 t) + 6.
+    Sinusoid,
+    /// x = e^{0.06 t} cos t, y = e^{0.06 t} sin t, z = 0.1 t + 5.
+    Spiral,
+}
+
+impl TrajectoryArg {
+    fn trajectory(self) -> Trajectory {
+        match self {
+            TrajectoryArg::Circle => Trajectory::Circular,
+            TrajectoryArg::Sinusoid => Trajectory::Sinusoidal,
+            TrajectoryArg::Spiral => Trajectory::Spiral,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            TrajectoryArg::Circle => "circle",
+            TrajectoryArg::Sinusoid => "sinusoid",
+            TrajectoryArg::Spiral => "spiral",
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct TrackArgs {
+    /// Model file (uavgen-model/1) the MPC uses.
+    #[arg(long)]
+    model: PathBuf,
+    /// Plant file (docs/plant-format.md) the MPC controls.
+    #[arg(long)]
+    plant: PathBuf,
+    /// Trajectory (comma separated for several: one sub-directory each).
+    #[arg(long, value_enum, value_delimiter = ',', required = true)]
+    trajectory: Vec<TrajectoryArg>,
+    /// Output directory (report.md, report.json, samples.csv, path_3d.svg, position_errors.svg).
+    #[arg(long)]
+    out: PathBuf,
+    /// Replace --out if it exists.
+    #[arg(long)]
+    force: bool,
+    /// Use the generic reference solver (interpreted model + clarabel) instead of the generated crate.
+    #[arg(long)]
+    generic: bool,
+    /// Flight time in s.
+    #[arg(long, default_value_t = 30.0)]
+    duration: f64,
+    /// The plant's random seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// MPC horizon N.
+    #[arg(long, default_value_t = 30)]
+    horizon: usize,
+    /// MPC options file (weights, bounds; docs/mpc.md): default the paper's.
+    #[arg(long)]
+    mpc: Option<PathBuf>,
+    /// Scratch directory for the generated crate and the harness build.
+    #[arg(long, default_value = "target/uavgen-track")]
+    work_dir: PathBuf,
+}
+
+fn write(path: &Path, text: &str) -> Result<(), String> {
+    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+pub fn run(args: TrackArgs) -> Result<(), String> {
+    if args.out.exists() && !args.force {
+        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
+    }
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        return Err(format!(
+            "--duration: must be a positive number of seconds, got {}",
+            args.duration
+        ));
+    }
+    let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
+    if model.nx() != 12 || model.nu() != 4 {
+        return Err(format!(
+            "{}: uavgen track needs a model with the 12 standard states and 4 inputs (this one has {} and {})",
+            args.model.display(),
+            model.nx(),
+            model.nu()
+        ));
+    }
+    let plant = PlantFile::load(&args.plant).map_err(|e| e.to_string())?;
+    let dt = uavgen::Plant::new(&plant, args.seed).sample_period();
+    let mpc = match &args.mpc {
+        Some(p) => Some(uavgen::MpcOptions::load(&model, p)?),
+        None => None,
+    };
+    let options = GenerateOptions {
+        horizon: args.horizon,
+        rate_hz: 1.0 / dt,
+        mpc: mpc.clone(),
+        ..GenerateOptions::default()
+    };
+    options.validate().map_err(|e| e.to_string())?;
+
+    let mut backend: Box<dyn Backend> = if args.generic {
+        let ir = uavgen::ModelIr::new(&model);
+        let substeps = uavgen::discretize::auto_substeps(&ir, dt, &options.envelope)
+            .map_err(|e| format!("{}: {e}", args.model.display()))?
+            .substeps;
+        let mpc = mpc.unwrap_or_else(|| uavgen::MpcOptions::defaults(&model));
+        Box::new(GenericBackend::new(&model, mpc, args.horizon, dt, substeps))
+    } else {
+        eprintln!("building the generated solver and the tracking harness ...");
+        let (name, binary) = track::build::build_harness(&model, &options, &args.work_dir)?;
+        Box::new(HarnessBackend::spawn(&binary, &name)?)
+    };
+
+    // Everything goes to a scratch directory first, renamed into place at the end.
+    let tmp = args.out.with_extension("uavgen-tmp");
+    let _ = std::fs::remove_dir_all(&tmp);
+    let result = fly_all(&args, &plant, dt, backend.as_mut(), &tmp);
+    if let Err(e) = result {
+        let _ = std::fs::remove_dir_all(&tmp);
+        return Err(e);
+    }
+    if args.out.exists() {
+        std::fs::remove_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    }
+    std::fs::rename(&tmp, &args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+fn fly_all(args: &TrackArgs, plant: &PlantFile, dt: f64, backend: &mut dyn Backend, tmp: &Path) -> Result<(), String> {
+    let several = args.trajectory.len() > 1;
+    let mut summary = Vec::new();
+    for &which in &args.trajectory {
+        let dir = if several {
+            tmp.join(which.name())
+        } else {
+            tmp.to_path_buf()
+        };
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let options = TrackOptions {
+            trajectory: which.trajectory(),
+            duration: args.duration,
+            seed: args.seed,
+            ..TrackOptions::default()
+        };
+        let bar = super::identify::progress_bar((args.duration / dt).round() as usize, which.name());
+        let samples = track::fly(backend, plant, &options, &mut |x, _, _| x.to_vec(), &mut |done, _| {
+            bar.set_position(done as u64)
+        })?;
+        bar.finish_and_clear();
+        let report = TrackReport::new(
+            &args.model.display().to_string(),
+            &args.plant.display().to_string(),
+            which.name(),
+            &backend.describe(),
+            args.seed,
+            dt,
+            &samples,
+            &backend.bounds(),
+        );
+        write(&dir.join("report.md"), &report.markdown())?;
+        let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())? + "\n";
+        write(&dir.join("report.json"), &json)?;
+        write(&dir.join("samples.csv"), &track::report::samples_csv(&samples))?;
+        track::plot::write(&samples, which.name(), &dir)?;
+        println!(
+            "{}: position RMSE {:.4} m (x {:.4}, y {:.4}, z {:.4}), MAE {:.4}, d1 {:.4}; feedback median {:.1} µs, max {:.1} µs; {} inputs out of bounds",
+            which.name(),
+            report.overall.rmse,
+            report.axes["x"].rmse,
+            report.axes["y"].rmse,
+            report.axes["z"].rmse,
+            report.overall.mae,
+            report.overall.d1,
+            report.feedback.median_us,
+            report.feedback.max_us,
+            report.inputs_out_of_bounds
+        );
+        summary.push(report);
+    }
+    if several {
+        let json = serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())? + "\n";
+        write(&tmp.join("summary.json"), &json)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,137 @@
+//! The `corrections` block in the symbolic graph (docs/model-format.md#corrections).
+//!
+//! Graph variables of a corrected model: the 12 standard states, the extra states
+//! (`<input>_lagged` in input order, then `flight_time`), then the inputs. The base model is
+//! built on the 12 states and the *effective* inputs (the lag state s for a lagged input, the
+//! input itself otherwise); its rows are `base`. With v = [vx vy vz], a = the base's
+//! (vx, vy, vz) rows and T = a + g e_z (the thrust acceleration):
+//!
+//! ```text
+//! v̇ = a − D₁ v − D₂ √(‖v‖² + ε²) v + b + κ T + c t_f T + e_z gain T_z ρ²
+//!     D₁, D₂ = diag(xy, xy, z) of the linear and quadratic drag, ε = 0.1 m/s,
+//!     ρ² = r² / (z² + r²) with r = R/4, t_f = flight_time
+//! ṡ = (u − s) / τ        for each lagged input
+//! ṫ_f = 1
+//! ```
+//!
+//! Every correction is evaluated with the base model's `a` at the same state and input, then
+//! they are summed. Latency is not part of f.
+
+use crate::model::corrections::{QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
+use crate::model::{Corrections, Dynamics, Model};
+use crate::symbolic::{Graph, Id};
+
+/// Indices of the standard states the corrections act on.
+const Z: usize = 2;
+const VX: usize = 6;
+
+/// g of the thrust corrections: the PD model's gravity, 9.81 m/s² for the other kinds.
+pub fn gravity(model: &Model) -> f64 {
+    match &model.dynamics {
+        Dynamics::Pd(p) => p.gravity,
+        Dynamics::Sindy(_) => STANDARD_GRAVITY,
+    }
+}
+
+/// The inputs the base model sees: for each input, the variable of its lag state if it is
+/// lagged, the input itself otherwise. `vars` are all graph variables (states then inputs).
+pub fn effective_inputs(model: &Model, vars: &[Id]) -> Vec<Id> {
+    let (nxb, nx) = (model.base_nx(), model.nx());
+    let mut next_lag = nxb;
+    model
+        .inputs
+        .iter()
+        .enumerate()
+        .map(|(i, name)| match model.corrections.as_ref().and_then(|c| c.lag(name)) {
+            Some(_) => {
+                next_lag += 1;
+                vars[next_lag - 1]
+            }
+            None => vars[nx + i],
+        })
+        .collect()
+}
+
+/// ẋ of the corrected model from the base model's rows `base` (one per base state).
+pub fn apply(g: &mut Graph, model: &Model, c: &Corrections, vars: &[Id], base: Vec<Id>) -> Vec<Id> {
+    let (nxb, nx) = (model.base_nx(), model.nx());
+    let v = [vars[VX], vars[VX + 1], vars[VX + 2]];
+    let a = [base[VX], base[VX + 1], base[VX + 2]];
+    let grav = g.constant(gravity(model));
+    // T = a + g e_z
+    let thrust = [a[0], a[1], g.add(a[2], grav)];
+    let mut delta: [Vec<Id>; 3] = Default::default();
+
+    // −diag(xy, xy, z) v
+    if let Some(d) = c.linear_drag {
+        for (k, coef) in [d.xy, d.xy, d.z].into_iter().enumerate() {
+            let m = g.constant(-coef);
+            delta[k].push(g.mul(m, v[k]));
+        }
+    }
+    // −diag(xy, xy, z) √(‖v‖² + ε²) v
+    if let Some(d) = c.quadratic_drag {
+        let squares: Vec<Id> = v.iter().map(|&vk| g.powi(vk, 2)).collect();
+        let eps2 = g.constant(QUADRATIC_DRAG_EPSILON * QUADRATIC_DRAG_EPSILON);
+        let sum = g.sum(squares.into_iter().chain([eps2]));
+        let speed = g.sqrt(sum);
+        for (k, coef) in [d.xy, d.xy, d.z].into_iter().enumerate() {
+            let m = g.constant(-coef);
+            let sv = g.mul(speed, v[k]);
+            delta[k].push(g.mul(m, sv));
+        }
+    }
+    // b
+    if let Some(b) = c.force_bias {
+        for k in 0..3 {
+            delta[k].push(g.constant(b[k]));
+        }
+    }
+    // κ T
+    if let Some(kappa) = c.thrust_gain {
+        let kappa = g.constant(kappa);
+        for k in 0..3 {
+            delta[k].push(g.mul(kappa, thrust[k]));
+        }
+    }
+    // c · t_f · T (flight_time is the last state)
+    if let Some(d) = c.thrust_decay {
+        let rate = g.constant(d.per_second);
+        let scale = g.mul(rate, vars[nx - 1]);
+        for k in 0..3 {
+            delta[k].push(g.mul(scale, thrust[k]));
+        }
+    }
+    // e_z · gain · T_z · r² / (z² + r²), r = R/4
+    if let Some(e) = c.ground_effect {
+        let r = e.rotor_radius / 4.0;
+        let r2 = g.constant(r * r);
+        let z2 = g.powi(vars[Z], 2);
+        let den = g.add(z2, r2);
+        let rho2 = g.div(r2, den);
+        let gain = g.constant(e.gain);
+        let t = g.mul(gain, thrust[2]);
+        delta[2].push(g.mul(t, rho2));
+    }
+
+    let mut f = base;
+    for (k, terms) in delta.into_iter().enumerate() {
+        f[VX + k] = g.sum(std::iter::once(f[VX + k]).chain(terms));
+    }
+    // ṡ = (u − s) / τ, in the order of the extra states.
+    let mut lag_state = nxb;
+    for (i, name) in model.inputs.iter().enumerate() {
+        if let Some(tau) = c.lag(name) {
+            let s = vars[lag_state];
+            let du = g.sub(vars[nx + i], s);
+            let inv_tau = g.constant(1.0 / tau);
+            f.push(g.mul(inv_tau, du));
+            lag_state += 1;
+        }
+    }
+    if c.thrust_decay.is_some() {
+        f.push(g.one());
+    }
+    debug_assert_eq!(f.len(), nx, "one row per state");
+    f
+}

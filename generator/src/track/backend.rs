@@ -1,0 +1,266 @@
+//! The MPC behind `uavgen track`: the generated crate through the runtime's `Controller` in a
+//! harness process, or the generic reference solver in-process.
+
+use crate::reference::{GenericMpc, MpcProblem};
+use crate::{Model, ModelIr, MpcOptions};
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::time::Instant;
+use uavgen_runtime::Trajectory;
+
+/// One closed-loop sample's answer from the MPC.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepAnswer {
+    pub u: Vec<f64>,
+    /// The solver's status name (`Solved`, `IterationCap`, …).
+    pub status: String,
+    pub qp_iterations: usize,
+    /// Time of the feedback phase (the measurement-to-input latency) and of the preparation of
+    /// the next sample, in ns.
+    pub feedback_ns: f64,
+    pub prepare_ns: f64,
+    /// `-` or what the runtime controller reported (`InvalidState`, `InputClamped`, …).
+    pub error: String,
+}
+
+/// A real-time-iteration MPC that tracks one of the paper's trajectories.
+pub trait Backend {
+    /// Input bounds (u_min, u_max).
+    fn bounds(&self) -> (Vec<f64>, Vec<f64>);
+    /// Reset the guess to the constant (x0, u) and prepare the first QP at time t0.
+    fn start(&mut self, trajectory: Trajectory, t0: f64, x0: &[f64], u: &[f64]) -> Result<(), String>;
+    /// Feedback for the measured state x, then preparation of the next sample.
+    fn step(&mut self, x: &[f64]) -> Result<StepAnswer, String>;
+    /// What runs: "generated crate <name> via uavgen-runtime" or "generic solver".
+    fn describe(&self) -> String;
+}
+
+/// The harness process (runtime/track-harness) driven over stdin/stdout.
+pub struct HarnessBackend {
+    child: Child,
+    stdin: ChildStdin,
+    stdout: BufReader<ChildStdout>,
+    nx: usize,
+    nu: usize,
+    u_min: Vec<f64>,
+    u_max: Vec<f64>,
+    name: String,
+}
+
+impl HarnessBackend {
+    /// Start the harness binary and read its dimensions.
+    pub fn spawn(binary: &std::path::Path, name: &str) -> Result<Self, String> {
+        let mut child = Command::new(binary)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| format!("{}: {e}", binary.display()))?;
+        let stdin = child.stdin.take().ok_or("harness: no stdin")?;
+        let stdout = BufReader::new(child.stdout.take().ok_or("harness: no stdout")?);
+        let mut h = Self {
+            child,
+            stdin,
+            stdout,
+            nx: 0,
+            nu: 0,
+            u_min: Vec::new(),
+            u_max: Vec::new(),
+            name: name.to_string(),
+        };
+        let dims = h.request("dims")?;
+        let w: Vec<&str> = dims.split_whitespace().collect();
+        let parse = |s: &str| s.parse::<f64>().map_err(|_| format!("harness: bad dims '{dims}'"));
+        if w.len() < 5 || w[0] != "dims" {
+            return Err(format!("harness: bad dims '{dims}'"));
+        }
+        h.nx = parse(w[1])? as usize;
+        h.nu = parse(w[2])? as usize;
+        if w.len() != 5 + 2 * h.nu {
+            return Err(format!("harness: bad dims '{dims}'"));
+        }
+        h.u_min = w[5..5 + h.nu].iter().map(|s| parse(s)).collect::<Result<_, _>>()?;
+        h.u_max = w[5 + h.nu..].iter().map(|s| parse(s)).collect::<Result<_, _>>()?;
+        Ok(h)
+    }
+
+    fn request(&mut self, line: &str) -> Result<String, String> {
+        writeln!(self.stdin, "{line}")
+            .and_then(|()| self.stdin.flush())
+            .map_err(|e| format!("harness: {e}"))?;
+        let mut answer = String::new();
+        self.stdout
+            .read_line(&mut answer)
+            .map_err(|e| format!("harness: {e}"))?;
+        if answer.is_empty() {
+            return Err("harness: exited unexpectedly".into());
+        }
+        if let Some(e) = answer.strip_prefix("error ") {
+            return Err(format!("harness: {}", e.trim()));
+        }
+        Ok(answer.trim().to_string())
+    }
+
+    pub fn nx(&self) -> usize {
+        self.nx
+    }
+}
+
+fn join(v: &[f64]) -> String {
+    v.iter().map(|a| format!("{a:?}")).collect::<Vec<_>>().join(" ")
+}
+
+/// The harness's name for a trajectory.
+pub fn trajectory_word(t: Trajectory) -> &'static str {
+    match t {
+        Trajectory::Sinusoidal => "sinusoid",
+        Trajectory::Circular => "circle",
+        Trajectory::Spiral => "spiral",
+    }
+}
+
+impl Backend for HarnessBackend {
+    fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        (self.u_min.clone(), self.u_max.clone())
+    }
+
+    fn start(&mut self, trajectory: Trajectory, t0: f64, x0: &[f64], u: &[f64]) -> Result<(), String> {
+        if x0.len() != self.nx || u.len() != self.nu {
+            return Err(format!("harness: expects {} states and {} inputs", self.nx, self.nu));
+        }
+        let line = format!("start {} {t0:?} {} {}", trajectory_word(trajectory), join(x0), join(u));
+        self.request(&line).map(|_| ())
+    }
+
+    fn step(&mut self, x: &[f64]) -> Result<StepAnswer, String> {
+        let answer = self.request(&format!("step {}", join(x)))?;
+        let w: Vec<&str> = answer.split_whitespace().collect();
+        let bad = || format!("harness: unexpected answer '{answer}'");
+        if w.len() != 1 + self.nu + 5 || w[0] != "u" {
+            return Err(bad());
+        }
+        let num = |s: &str| s.parse::<f64>().map_err(|_| bad());
+        Ok(StepAnswer {
+            u: w[1..1 + self.nu].iter().map(|s| num(s)).collect::<Result<_, _>>()?,
+            status: w[1 + self.nu].to_string(),
+            qp_iterations: num(w[2 + self.nu])? as usize,
+            feedback_ns: num(w[3 + self.nu])?,
+            prepare_ns: num(w[4 + self.nu])?,
+            error: w[5 + self.nu].to_string(),
+        })
+    }
+
+    fn describe(&self) -> String {
+        format!("generated crate `{}` through uavgen-runtime's Controller", self.name)
+    }
+}
+
+impl Drop for HarnessBackend {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The generic reference solver (interpreted model, clarabel), one RTI step per sample.
+pub struct GenericBackend {
+    mpc: GenericMpc,
+    options: MpcOptions,
+    trajectory: Trajectory,
+    t: f64,
+    dt: f64,
+    nx: usize,
+}
+
+impl GenericBackend {
+    pub fn new(model: &Model, options: MpcOptions, horizon: usize, dt: f64, substeps: usize) -> Self {
+        let problem = MpcProblem {
+            horizon,
+            dt,
+            substeps,
+            options: options.clone(),
+        };
+        Self {
+            mpc: GenericMpc::new(ModelIr::new(model), problem),
+            options,
+            trajectory: Trajectory::Circular,
+            t: 0.0,
+            dt,
+            nx: model.nx(),
+        }
+    }
+
+    fn window(&self) -> Vec<Vec<f64>> {
+        let n = self.mpc.problem().horizon;
+        (0..=n)
+            .map(|k| {
+                let t = self.t + k as f64 * self.dt;
+                let mut r = vec![0.0; self.nx];
+                for (i, p) in self.trajectory.position(t).into_iter().enumerate() {
+                    r[i] = p;
+                }
+                if self.nx >= 9 {
+                    for (i, v) in self.trajectory.velocity(t).into_iter().enumerate() {
+                        r[6 + i] = v;
+                    }
+                }
+                r
+            })
+            .collect()
+    }
+}
+
+impl Backend for GenericBackend {
+    fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        (self.options.u_min.clone(), self.options.u_max.clone())
+    }
+
+    fn start(&mut self, trajectory: Trajectory, t0: f64, x0: &[f64], u: &[f64]) -> Result<(), String> {
+        self.trajectory = trajectory;
+        self.t = t0;
+        self.mpc.initialize(x0, u);
+        Ok(())
+    }
+
+    fn step(&mut self, x: &[f64]) -> Result<StepAnswer, String> {
+        let reference = self.window();
+        let start = Instant::now();
+        let result = self.mpc.rti_step(x, &reference);
+        let elapsed = start.elapsed().as_nanos() as f64;
+        let (u, status, qp_iterations) = match result {
+            Ok(s) => (s.u0, "Solved".to_string(), s.qp_iterations),
+            Err(e) => (
+                self.mpc.planned_inputs().first().cloned().unwrap_or_default(),
+                format!("Failed({e})").replace(' ', "_"),
+                0,
+            ),
+        };
+        self.mpc.shift();
+        self.t += self.dt;
+        // The active-set polish lands on the bounds up to rounding (1e-15); like the runtime's
+        // Controller, apply the input clamped into them and say so when that was more than rounding.
+        let mut error = "-".to_string();
+        let u: Vec<f64> = u
+            .iter()
+            .zip(self.options.u_min.iter().zip(&self.options.u_max))
+            .map(|(&v, (&lo, &hi))| {
+                if v < lo - 1e-9 || v > hi + 1e-9 {
+                    error = "InputClamped".into();
+                }
+                v.clamp(lo, hi)
+            })
+            .collect();
+        Ok(StepAnswer {
+            u,
+            status,
+            qp_iterations,
+            feedback_ns: elapsed,
+            prepare_ns: 0.0,
+            error,
+        })
+    }
+
+    fn describe(&self) -> String {
+        "generic reference solver (interpreted model + clarabel, one RTI step per sample)".into()
+    }
+}
