@@ -586,3 +586,46 @@ fn identify_and_evaluate_from_logs() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn identify_with_input_delay_writes_the_latency_and_refuses_bad_specs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = tmp.path().join("flight.csv");
+    simulated_log(&log, 600);
+    let out = tmp.path().join("pd.json");
+    let o = uavgen(&[
+        "identify",
+        "--method",
+        "pd",
+        "--log",
+        log.to_str().unwrap(),
+        "--input-delay",
+        "u_roll=0.1,u_yaw_rate=0.2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(v["corrections"]["latency"]["u_roll"], 0.1);
+    assert_eq!(v["corrections"]["latency"]["u_yaw_rate"], 0.2);
+    assert!(v["corrections"]["latency"].get("u_vz").is_none());
+    // The generator reads it: the delays become INPUT_DELAY_SAMPLES = round(delay · 30 Hz).
+    let model = uavgen::load(&out).unwrap();
+    assert_eq!(model.input_delays(), vec![0.0, 0.1, 0.0, 0.2]);
+    for (spec, named) in [("u_foo=0.1", "unknown input 'u_foo'"), ("-0.1", ">= 0"), ("u_vz=abc", "'abc'")] {
+        let bad = tmp.path().join("bad.json");
+        let o = uavgen(&[
+            "identify",
+            "--method",
+            "pd",
+            "--log",
+            log.to_str().unwrap(),
+            &format!("--input-delay={spec}"),
+            "--out",
+            bad.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains(named), "{spec}: {}", stderr(&o));
+        assert!(!bad.exists());
+    }
+}

@@ -89,6 +89,10 @@ pub struct IdentifyArgs {
     /// SINDy: criterion of the sweep.
     #[arg(long, value_enum, default_value_t = CriterionArg::Aic)]
     criterion: CriterionArg,
+    /// Pure input delay to fit with, written to the model as `corrections.latency` (the runtime
+    /// compensates it): seconds for every input, or per channel `u_vz=0.13,u_roll=0.08,…`.
+    #[arg(long)]
+    input_delay: Option<String>,
     /// PD: mass in kg.
     #[arg(long, default_value_t = 2.4)]
     mass: f64,
@@ -110,6 +114,35 @@ pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
     }
     bar.set_message(what.to_string());
     bar
+}
+
+const INPUTS: [&str; 4] = ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"];
+
+/// `0.1` (every input) or `u_vz=0.13,u_roll=0.08` (the others 0), in seconds.
+fn parse_input_delay(spec: &str) -> Result<[f64; 4], String> {
+    let bad = |what: &str| format!("--input-delay '{spec}': {what}");
+    let check = |v: f64| {
+        if v.is_finite() && v >= 0.0 {
+            Ok(v)
+        } else {
+            Err(bad("delays must be finite and >= 0 s"))
+        }
+    };
+    if let Ok(v) = spec.trim().parse::<f64>() {
+        return Ok([check(v)?; 4]);
+    }
+    let mut out = [0.0; 4];
+    for part in spec.split(',') {
+        let (name, value) = part
+            .split_once('=')
+            .ok_or_else(|| bad("expected seconds, or name=seconds pairs separated by commas"))?;
+        let j = INPUTS
+            .iter()
+            .position(|n| *n == name.trim())
+            .ok_or_else(|| bad(&format!("unknown input '{}' (inputs: {})", name.trim(), INPUTS.join(", "))))?;
+        out[j] = check(value.trim().parse().map_err(|_| bad(&format!("'{}' is not a number", value.trim())))?)?;
+    }
+    Ok(out)
 }
 
 fn check_positive(name: &str, v: f64) -> Result<(), String> {
@@ -139,10 +172,15 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         }
         logs.push(log);
     }
+    let input_delay = match &args.input_delay {
+        Some(spec) => parse_input_delay(spec)?,
+        None => [0.0; 4],
+    };
     let dataset = build(
         &logs,
         &DatasetOptions {
             savgol,
+            input_delay,
             ..DatasetOptions::default()
         },
     )
@@ -242,6 +280,23 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())?
         }
     } + "\n";
+    let json = if input_delay.iter().any(|&d| d > 0.0) {
+        let latency = INPUTS
+            .iter()
+            .zip(input_delay)
+            .filter(|(_, d)| *d > 0.0)
+            .map(|(n, d)| (n.to_string(), d))
+            .collect();
+        let corrections = uavgen::model::Corrections {
+            source: Some("uavgen identify --input-delay: the model was fitted to u(t - delay)".into()),
+            latency,
+            ..Default::default()
+        };
+        uavgen::model::attach_corrections(&json, &args.out.display().to_string(), &corrections)
+            .map_err(|e| e.to_string())?
+    } else {
+        json
+    };
     // Exactly what `--model` will read, validated before anything is written.
     let model = uavgen::model::parse(&json, &args.out.display().to_string())
         .map_err(|e| format!("the identified model is invalid: {e}"))?;

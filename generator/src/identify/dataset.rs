@@ -18,6 +18,10 @@ pub struct DatasetOptions {
     pub trim_edges: bool,
     /// Use the smoothed states (true) or the logged ones (false) as regressors.
     pub smooth_states: bool,
+    /// Pure delay of each input channel (s, LOG_FORMAT.md input order): the sample at k is paired
+    /// with the input logged round(delay/Δt) samples earlier, u_j(t − d_j), so the fitted model is
+    /// ẋ = f(x, u(t − d)); the first max_j d_j samples of each segment are dropped.
+    pub input_delay: [f64; 4],
 }
 
 impl Default for DatasetOptions {
@@ -27,6 +31,7 @@ impl Default for DatasetOptions {
             lowpass: None,
             trim_edges: true,
             smooth_states: false,
+            input_delay: [0.0; 4],
         }
     }
 }
@@ -105,7 +110,20 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
             } else {
                 seg.x.clone()
             };
-            let (mut u, mut dx) = (seg.u.clone(), dx);
+            // u_j(t − d_j): each channel shifted by its delay in samples.
+            let shift: Vec<usize> = options
+                .input_delay
+                .iter()
+                .map(|d| (d.max(0.0) / dt).round() as usize)
+                .collect();
+            let max_shift = shift.iter().copied().max().unwrap_or(0);
+            let mut u = seg.u.clone();
+            for k in (0..u.len()).rev() {
+                for (j, &s) in shift.iter().enumerate() {
+                    u[k][j] = seg.u[k.saturating_sub(s)][j];
+                }
+            }
+            let mut dx = dx;
             if let Some(lp) = &options.lowpass {
                 x = try_columnwise(&x, |y| lp.try_apply(y, dt)).map_err(err)?;
                 u = try_columnwise(&u, |y| lp.try_apply(y, dt)).map_err(err)?;
@@ -113,10 +131,13 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
             }
             let (start, end) = if options.trim_edges {
                 let h = options.savgol.half_window();
-                (h, seg.t.len() - h)
+                (h.max(max_shift), seg.t.len() - h)
             } else {
-                (0, seg.t.len())
+                (max_shift, seg.t.len())
             };
+            if start >= end {
+                continue;
+            }
             segments.push(SegmentData {
                 log: li,
                 segment: si,

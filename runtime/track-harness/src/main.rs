@@ -13,10 +13,14 @@
 //!   the controller's feedback for x, then its preparation of the next sample (timed separately
 //!   with `std::time::Instant`); ERROR is `-` or the runtime's `ControlErrorKind`.
 //! - anything malformed → `error MESSAGE` (the harness keeps running).
+//!
+//! A model with input delays (`corrections.latency`, the crate's `INPUT_DELAY_SAMPLES`) is
+//! compensated by the runtime's `DelayCompensator`: the MPC solves from the state predicted over the
+//! delay with the inputs already sent.
 
 use std::io::{BufRead, Write};
 use std::time::Instant;
-use uavgen_runtime::{mpc_adapter, Controller, MpcSolver, Trajectory};
+use uavgen_runtime::{mpc_adapter, Controller, DelayCompensator, MpcSolver, NoCycleCounter, Trajectory};
 
 mpc_adapter!(struct Solver(solver));
 
@@ -49,7 +53,14 @@ fn join(v: &[R]) -> String {
     v.iter().map(|a| format!("{a:?}")).collect::<Vec<_>>().join(" ")
 }
 
-type Ctl<'a> = Controller<&'a mut Solver, Trajectory, R, NX, NU, N1>;
+/// The longest input delay (samples) the harness compensates.
+const MAX_DELAY: usize = 32;
+type Dynamics = fn(&[R; NX], &[R; NU]) -> [R; NX];
+type Predictor = DelayCompensator<R, Dynamics, NX, NU, MAX_DELAY>;
+/// The controller solves from the state predicted over the model's input delays
+/// (`solver::INPUT_DELAY_SAMPLES`, all 0 unless the model file has `corrections.latency`: then the
+/// prediction is the identity).
+type Ctl<'a> = Controller<&'a mut Solver, Trajectory, R, NX, NU, N1, NoCycleCounter, Predictor>;
 
 fn handle<'a>(line: &str, solver: &mut Option<&'a mut Solver>, ctl: &mut Option<Ctl<'a>>) -> Result<String, String> {
     let words: Vec<&str> = line.split_whitespace().collect();
@@ -74,7 +85,10 @@ fn handle<'a>(line: &str, solver: &mut Option<&'a mut Solver>, ctl: &mut Option<
                 Some(c) => c.into_parts().0,
                 None => solver.take().ok_or("no solver")?,
             };
-            let mut c = Controller::new(s, traj);
+            let dynamics: Dynamics = solver::discrete_dynamics;
+            let predictor =
+                DelayCompensator::new(dynamics, solver::INPUT_DELAY_SAMPLES, u).map_err(|e| format!("{e:?}"))?;
+            let mut c = Controller::new(s, traj).with_delay_compensation(predictor);
             c.initialize(&x0, &u);
             let status = c.start(rest[0]).map_err(|e| format!("reference: {e}"))?;
             *ctl = Some(c);
