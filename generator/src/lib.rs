@@ -8,6 +8,7 @@
 pub mod analysis;
 pub mod bench;
 pub mod codegen;
+pub mod diagnose;
 pub mod discretize;
 pub mod evaluate;
 pub mod identify;
@@ -17,6 +18,7 @@ pub mod metrics;
 pub mod model;
 pub mod mpc_options;
 pub mod reference;
+pub mod selfcheck;
 pub mod sim;
 pub mod symbolic;
 pub mod track;

@@ -39,6 +39,8 @@ enum Command {
     Simulate(cli::simulate::SimulateArgs),
     /// Closed-loop MPC on the plant simulator along one of the paper's trajectories (docs/track.md).
     Track(cli::track::TrackArgs),
+    /// Diagnose a model on flight logs: where it parts from the data, which effect explains it, the corrected model (docs/diagnose.md).
+    Diagnose(cli::diagnose::DiagnoseArgs),
 }
 
 #[derive(Args)]
@@ -152,6 +154,7 @@ fn main() -> ExitCode {
         Some(Command::Evaluate(args)) => cli::evaluate::run(args),
         Some(Command::Simulate(args)) => cli::simulate::run(args),
         Some(Command::Track(args)) => cli::track::run(args),
+        Some(Command::Diagnose(args)) => cli::diagnose::run(args),
         None => generate(cli.generate),
     };
     match result {

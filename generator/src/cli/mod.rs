@@ -13,6 +13,7 @@ pub fn write_atomically(path: &Path, text: &str) -> Result<(), String> {
         format!("{}: {e}", path.display())
     })
 }
+pub mod diagnose;
 pub mod evaluate;
 pub mod simulate;
 pub mod track;

@@ -3,7 +3,7 @@
 //! - `excite`: rich excitation for identification. Multisines (10 log-spaced frequencies from
 //!   0.05 to 2.5 Hz, random phases) plus random steps (held 0.5–3 s) on all four inputs, on top of
 //!   a weak position/altitude-keeping loop towards random waypoints (|x|, |y| ≤ 4 m, z 1.5–10 m,
-//!   one in six a low pass at z 0.4–0.8 m for ground effect; a new one every 4–8 s). The tilt
+//!   one in four a low pass at z 0.1–0.4 m for ground effect; a new one every 4–8 s). The tilt
 //!   √(roll² + pitch²) of the command is limited to 0.35 rad, the horizontal velocity reference
 //!   to 2.5 m/s. Starts at (0, 0, 3), random heading.
 //! - `hover`: hold (3, 3, 5) with small random disturbances on all inputs.
@@ -283,12 +283,12 @@ impl Pilot {
 
     fn excite(&mut self, t: f64, x: &[f64; 12]) -> [f64; 4] {
         if t >= self.next_waypoint {
-            let low = self.rng.uniform() < 1.0 / 6.0;
+            let low = self.rng.uniform() < 1.0 / 4.0;
             self.waypoint = [
                 self.rng.range(-4.0, 4.0),
                 self.rng.range(-4.0, 4.0),
                 if low {
-                    self.rng.range(0.4, 0.8)
+                    self.rng.range(0.1, 0.4)
                 } else {
                     self.rng.range(1.5, 10.0)
                 },
@@ -311,11 +311,11 @@ impl Pilot {
         }
         let a = [1.0 * (v_ref[0] - x[6]), 1.0 * (v_ref[1] - x[7])];
         let [roll, pitch] = self.outer.tilt_for(a, x[5]);
-        // Near the ground the vertical excitation fades, and below 0.3 m the pilot climbs.
+        // Near the ground the vertical excitation fades, and below 0.1 m the pilot climbs.
         let z = x[2];
-        let fade = ((z - 0.3) / 1.5).clamp(0.15, 1.0);
+        let fade = ((z - 0.1) / 1.5).clamp(0.15, 1.0);
         let mut vz = (0.8 * (self.waypoint[2] - z)).clamp(-1.5, 1.5) + fade * e[0];
-        if z < 0.3 {
+        if z < 0.1 {
             vz = vz.max(0.5);
         }
         let yaw_rate = 0.3 * wrap_angle(self.heading - x[5]) + e[3];

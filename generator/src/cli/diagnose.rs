@@ -1,0 +1,270 @@
+//! `uavgen diagnose`: where a model parts from flight data, which catalogued effect explains it,
+//! how far adding it shrinks the gap, and the corrected model (docs/diagnose.md).
+
+use clap::Args;
+use std::path::PathBuf;
+use uavgen::diagnose::{diagnose_with_progress, DiagnoseOptions, EffectKind, ResidualKind, Rules};
+use uavgen::identify::preprocess::SavGol;
+
+#[derive(Args)]
+pub struct DiagnoseArgs {
+    /// Model file (uavgen-model/1, without a `corrections` block).
+    #[arg(long, required_unless_present = "self_check")]
+    model: Option<PathBuf>,
+    /// Training flight log (LOG_FORMAT.md CSV); repeat for several.
+    #[arg(long = "log", required_unless_present = "self_check")]
+    logs: Vec<PathBuf>,
+    /// Held-out flight log the candidates are scored on; repeat for several. Without one:
+    /// cross-validation over the training logs.
+    #[arg(long = "holdout")]
+    holdout: Vec<PathBuf>,
+    /// Output directory: report.md, report.json, corrected.json and the plots.
+    #[arg(long)]
+    out: PathBuf,
+    /// Replace --out if it exists.
+    #[arg(long)]
+    force: bool,
+    /// Free-run horizon in samples (the MPC's).
+    #[arg(long, default_value_t = 30)]
+    horizon: usize,
+    /// RK4 substeps per sample (default: the automatic rule).
+    #[arg(long)]
+    substeps: Option<usize>,
+    /// Rotor radius of the ground effect, m.
+    #[arg(long, default_value_t = 0.1651)]
+    rotor_radius: f64,
+    /// g of the thrust effects, m/s² (default: the PD model's, else 9.81).
+    #[arg(long)]
+    gravity: Option<f64>,
+    /// Only these candidate effects (comma separated; default: the whole catalogue).
+    #[arg(long, value_delimiter = ',')]
+    effects: Option<Vec<String>>,
+    /// Name at most this many effects.
+    #[arg(long, default_value_t = 3)]
+    max_effects: usize,
+    /// Selection rule: the held-out ΔBIC must be below this.
+    #[arg(long, default_value_t = Rules::default().max_delta_bic, allow_hyphen_values = true)]
+    max_delta_bic: f64,
+    /// Selection rule: the held-out RMSE reduction of the affected channels must reach this fraction.
+    #[arg(long, default_value_t = Rules::default().min_reduction)]
+    min_reduction: f64,
+    /// Selection rule: the training z of the parameter must exceed this.
+    #[arg(long, default_value_t = Rules::default().min_z)]
+    min_z: f64,
+    /// Savitzky-Golay window (odd) of the derivative targets.
+    #[arg(long, default_value_t = 9)]
+    savgol_window: usize,
+    /// Savitzky-Golay polynomial order.
+    #[arg(long, default_value_t = 3)]
+    savgol_order: usize,
+    /// Plant file for a closed-loop comparison through `uavgen track` (pending: recorded only).
+    #[arg(long)]
+    plant: Option<PathBuf>,
+    /// Compare the model with the derivative pointwise (ẋ_SG − f(x, u), the identification's target)
+    /// instead of through the derivative's own filter.
+    #[arg(long)]
+    pointwise: bool,
+    /// Skip the "where" residual analysis (and its plots).
+    #[arg(long)]
+    no_where: bool,
+    /// Run the protocol on withheld effects instead (docs/diagnosis.md): the simulator flies nominal
+    /// logs and logs with each plant effect; a model identified from the nominal ones is diagnosed
+    /// against each. Prints the results; with --out, writes selfcheck.md and selfcheck.json there.
+    #[arg(long, conflicts_with_all = ["model", "logs", "holdout"])]
+    self_check: bool,
+    /// Self-check: only every effect at realistic magnitude, one pair and nominal logs (what CI runs).
+    #[arg(long, requires = "self_check")]
+    reduced: bool,
+    /// Self-check: the directory with nominal.json and effects/*.json.
+    #[arg(long, default_value = "plants", requires = "self_check")]
+    plants: PathBuf,
+    /// Self-check: also put the results into this Markdown file, between the lines
+    /// `<!-- self-check:begin -->` and `<!-- self-check:end -->` (e.g. docs/diagnosis.md).
+    #[arg(long, requires = "self_check")]
+    write_doc: Option<PathBuf>,
+}
+
+fn self_check(args: &DiagnoseArgs) -> Result<(), String> {
+    use uavgen::selfcheck::{self, cases, SelfCheckOptions};
+    let options = SelfCheckOptions {
+        cases: if args.reduced {
+            cases::reduced_cases()
+        } else {
+            cases::default_cases()
+        },
+        ..SelfCheckOptions::default()
+    };
+    if args.out.exists() && !args.force {
+        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
+    }
+    let bar = super::identify::progress_bar(options.cases.len(), "cases");
+    let check = selfcheck::run(&args.plants, &options, &mut |done, _, case| {
+        bar.set_position(done as u64);
+        bar.set_message(case.to_string());
+    })?;
+    bar.finish_and_clear();
+    let md = check.markdown();
+    println!("{md}");
+    let tmp = args.out.with_extension("uavgen-tmp");
+    let _ = std::fs::remove_dir_all(&tmp);
+    std::fs::create_dir_all(&tmp).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    let json = serde_json::to_string_pretty(&check).map_err(|e| e.to_string())? + "\n";
+    std::fs::write(tmp.join("selfcheck.json"), json).map_err(|e| e.to_string())?;
+    std::fs::write(tmp.join("selfcheck.md"), &md).map_err(|e| e.to_string())?;
+    if args.out.exists() {
+        std::fs::remove_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    }
+    std::fs::rename(&tmp, &args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    if let Some(doc) = &args.write_doc {
+        let text = std::fs::read_to_string(doc).map_err(|e| format!("{}: {e}", doc.display()))?;
+        let (begin, end) = ("<!-- self-check:begin -->", "<!-- self-check:end -->");
+        let (Some(a), Some(b)) = (text.find(begin), text.find(end)) else {
+            return Err(format!("{}: no `{begin}` … `{end}` section to replace", doc.display()));
+        };
+        if b < a {
+            return Err(format!("{}: `{end}` comes before `{begin}`", doc.display()));
+        }
+        let new = format!("{}{begin}\n{md}{}", &text[..a], &text[b..]);
+        super::write_atomically(doc, &new)?;
+    }
+    println!(
+        "self-check: {} of {} cases pass; wrote {}",
+        check.results.iter().filter(|r| r.passes()).count(),
+        check.results.len(),
+        args.out.display()
+    );
+    if check.passed() {
+        Ok(())
+    } else {
+        Err("self-check: some cases fail (see the table)".into())
+    }
+}
+
+fn read_logs(paths: &[PathBuf]) -> Result<Vec<uavgen::logs::FlightLog>, String> {
+    let mut logs = Vec::new();
+    for path in paths {
+        let log = uavgen::logs::read_log(path).map_err(|e| e.to_string())?;
+        for w in log.report.warnings() {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+        logs.push(log);
+    }
+    Ok(logs)
+}
+
+pub fn run(args: DiagnoseArgs) -> Result<(), String> {
+    if args.self_check {
+        return self_check(&args);
+    }
+    let (Some(model_path), false) = (args.model.clone(), args.logs.is_empty()) else {
+        return Err("--model and --log are required (or --self-check)".into());
+    };
+    if args.out.exists() && !args.force {
+        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
+    }
+    let savgol = SavGol::new(args.savgol_window, args.savgol_order)
+        .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
+    let candidates = match &args.effects {
+        None => EffectKind::ALL.to_vec(),
+        Some(names) => names
+            .iter()
+            .map(|n| {
+                EffectKind::from_name(n.trim()).ok_or_else(|| {
+                    let all: Vec<&str> = EffectKind::ALL.iter().map(|e| e.name()).collect();
+                    format!("--effects: unknown effect `{n}` (the catalogue: {})", all.join(", "))
+                })
+            })
+            .collect::<Result<_, _>>()?,
+    };
+    if args.max_effects == 0 {
+        return Err("--max-effects: must be at least 1".into());
+    }
+    for (name, v) in [
+        ("max-delta-bic", args.max_delta_bic),
+        ("min-reduction", args.min_reduction),
+        ("min-z", args.min_z),
+    ] {
+        if !v.is_finite() {
+            return Err(format!("--{name}: must be a finite number, got {v}"));
+        }
+    }
+    let model = uavgen::load(&model_path).map_err(|e| e.to_string())?;
+    let text = std::fs::read_to_string(&model_path).map_err(|e| format!("{}: {e}", model_path.display()))?;
+    let train = read_logs(&args.logs)?;
+    let holdout = read_logs(&args.holdout)?;
+    let options = DiagnoseOptions {
+        savgol,
+        residual: if args.pointwise {
+            ResidualKind::Pointwise
+        } else {
+            ResidualKind::Matched
+        },
+        horizon: args.horizon,
+        substeps: args.substeps,
+        gravity: args.gravity,
+        rotor_radius: args.rotor_radius,
+        rules: Rules {
+            max_effects: args.max_effects,
+            max_delta_bic: args.max_delta_bic,
+            min_reduction: args.min_reduction,
+            min_z: args.min_z,
+        },
+        candidates,
+        where_analysis: !args.no_where,
+        model_text: Some(text),
+        source: Some(format!(
+            "uavgen {} diagnose --model {} {}{}",
+            env!("CARGO_PKG_VERSION"),
+            model_path.display(),
+            args.logs
+                .iter()
+                .map(|p| format!("--log {}", p.display()))
+                .collect::<Vec<_>>()
+                .join(" "),
+            args.holdout
+                .iter()
+                .map(|p| format!(" --holdout {}", p.display()))
+                .collect::<String>()
+        )),
+        plant: args.plant.clone(),
+        ..DiagnoseOptions::default()
+    };
+    eprintln!(
+        "diagnosing {} on {} training log(s), {} ...",
+        model.name,
+        train.len(),
+        if holdout.is_empty() {
+            "cross-validation".to_string()
+        } else {
+            format!("{} held-out log(s)", holdout.len())
+        }
+    );
+    let bar = super::identify::progress_bar(0, "candidates");
+    let d = diagnose_with_progress(&model, &train, &holdout, &options, &mut |p| {
+        bar.set_length(p.total as u64);
+        bar.set_position(p.done as u64);
+        bar.set_message(p.what.to_string());
+    })
+    .map_err(|e| e.to_string())?;
+    bar.finish_and_clear();
+    println!("verdict: {}", d.verdict.join(" + "));
+    for e in d.effects.iter().take(4) {
+        println!(
+            "  {:<15} held-out ΔBIC {:>9.1}, RMSE reduction {:>5.1} %, z {:>6.1}{}",
+            e.name,
+            e.score,
+            100.0 * e.heldout_reduction,
+            e.z,
+            if e.selected { "  (named)" } else { "" }
+        );
+    }
+    if let (Some(b), Some(a)) = (&d.shrink.before.horizon, &d.shrink.after.horizon) {
+        println!(
+            "held-out horizon RMSE (overall, {} samples): {:.4} → {:.4}",
+            d.shrink.horizon, b.overall_rmse, a.overall_rmse
+        );
+    }
+    let files = d.write(&args.out, args.force).map_err(|e| e.to_string())?;
+    println!("wrote {} files into {}", files.len(), args.out.display());
+    Ok(())
+}

@@ -1,0 +1,95 @@
+//! The corrected model: the named model effects as the model format's `corrections` block
+//! (`crate::model::corrections`), attached to the input model file as it is.
+//!
+//! Parameters come from the fit on all training data. The format requires drag coefficients and
+//! the ground-effect gain ≥ 0 and a thrust gain > −1; a fitted value outside is written clamped
+//! (with a note) and the shrink figures use the clamped value too. `stale_samples` has no entry
+//! (it is about the data); `latency` is written as the input delays the runtime compensates.
+
+use super::catalogue::linear::columns;
+use super::catalogue::EffectKind;
+use super::select::State;
+use crate::model::{Corrections, Drag, GroundEffect, ThrustDecay};
+
+/// θ of a linear effect made valid for the model format; notes for clamped values.
+pub(crate) fn clamp(kind: EffectKind, theta: &[f64]) -> (Vec<f64>, Vec<String>) {
+    let mut out = theta.to_vec();
+    let mut notes = Vec::new();
+    let names = super::catalogue::linear::parameter_names(kind);
+    let mut floor = |i: usize, lo: f64, strict: bool| {
+        if out[i] < lo || (strict && out[i] <= lo) || !out[i].is_finite() {
+            let to = if strict { lo + 0.01 } else { lo };
+            notes.push(format!(
+                "{kind}.{} fitted {:.4}, written as {to} (the model format requires {} {lo})",
+                names[i],
+                out[i],
+                if strict { ">" } else { "≥" }
+            ));
+            out[i] = to;
+        }
+    };
+    match kind {
+        EffectKind::LinearDrag | EffectKind::QuadraticDrag => {
+            floor(0, 0.0, false);
+            floor(1, 0.0, false);
+        }
+        EffectKind::GroundEffect => floor(0, 0.0, false),
+        EffectKind::ThrustGain => floor(0, -1.0, true),
+        _ => {}
+    }
+    (out, notes)
+}
+
+/// The named linear effects with their (clamped) parameters from the concatenated θ.
+pub(crate) fn linear_parameters(state: &State, theta: &[f64]) -> (Vec<(EffectKind, Vec<f64>)>, Vec<String>) {
+    let mut at = 0;
+    let mut out = Vec::new();
+    let mut notes = Vec::new();
+    for &kind in &state.linear {
+        let p = columns(kind);
+        let (v, n) = clamp(kind, &theta[at..at + p]);
+        at += p;
+        out.push((kind, v));
+        notes.extend(n);
+    }
+    (out, notes)
+}
+
+/// The `corrections` block of the named effects.
+pub(crate) fn corrections(
+    state: &State,
+    linear: &[(EffectKind, Vec<f64>)],
+    inputs: &[String],
+    rotor_radius: f64,
+    source: String,
+) -> Corrections {
+    let mut c = Corrections {
+        source: Some(source),
+        ..Corrections::default()
+    };
+    for (kind, v) in linear {
+        match kind {
+            EffectKind::LinearDrag => c.linear_drag = Some(Drag { xy: v[0], z: v[1] }),
+            EffectKind::QuadraticDrag => c.quadratic_drag = Some(Drag { xy: v[0], z: v[1] }),
+            EffectKind::ForceBias => c.force_bias = Some([v[0], v[1], v[2]]),
+            EffectKind::ThrustGain => c.thrust_gain = Some(v[0]),
+            EffectKind::ThrustDecay => c.thrust_decay = Some(ThrustDecay { per_second: v[0] }),
+            EffectKind::GroundEffect => {
+                c.ground_effect = Some(GroundEffect {
+                    gain: v[0],
+                    rotor_radius,
+                })
+            }
+            _ => {}
+        }
+    }
+    for j in 0..4 {
+        if state.named.contains(&EffectKind::Latency) && state.transform.delay[j] > 0.0 {
+            c.latency.insert(inputs[j].clone(), state.transform.delay[j]);
+        }
+        if let Some(tau) = state.transform.lag[j] {
+            c.actuator_lag.insert(inputs[j].clone(), tau);
+        }
+    }
+    c
+}

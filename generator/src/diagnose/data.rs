@@ -1,0 +1,292 @@
+//! The logs prepared for the diagnosis: per segment the samples, the Savitzky-Golay derivative
+//! targets, the base model's filtered one-step residuals ([`super::residuals`]), the stale rows and
+//! the flight time; and the same with stale rows interpolated (the `stale_samples` augmentation).
+
+use super::catalogue::stale::{destale, stale_flags};
+use super::residuals::{filter, impulse, kernel, Base, ResidualKind};
+use super::DiagnoseError;
+use crate::identify::preprocess::{try_columnwise, SavGol};
+use crate::logs::{median, FlightLog};
+
+/// One stretch of data (a segment, or a part of one for cross-validation).
+#[derive(Clone, Debug)]
+pub(crate) struct SegData {
+    /// Index in the training or the held-out list.
+    pub log: usize,
+    pub holdout: bool,
+    pub segment: usize,
+    /// Part of the segment (cross-validation splits a lone segment), else 0.
+    pub part: usize,
+    /// The segment's median step, s.
+    pub dt: f64,
+    pub t: Vec<f64>,
+    pub x: Vec<[f64; 12]>,
+    pub u: Vec<[f64; 4]>,
+    pub volt: Option<Vec<f64>>,
+    /// Rows that repeat the previous row's states (as logged, also in the interpolated copy).
+    pub stale: Vec<bool>,
+    /// Seconds since the first row of the log (continued over segments; restarted consistently
+    /// when a segment's clock restarts).
+    pub flight_time: Vec<f64>,
+    /// Seconds since the first row of the segment.
+    pub segment_time: Vec<f64>,
+    /// The Savitzky-Golay half window: samples h..n−h are the interior ones.
+    pub h: usize,
+    /// The kernel w_μ of the derivative (length 2h).
+    pub kernel: Vec<f64>,
+    /// Savitzky-Golay derivative of vx..yaw_rate at the interior samples.
+    pub dx: Vec<[f64; 6]>,
+    /// The base model's f(x_m, u_m) at every row.
+    pub f: Vec<[f64; 12]>,
+    /// The base model's filtered one-step residual of vx..yaw_rate at the interior samples.
+    pub r: Vec<[f64; 6]>,
+    /// RK4 substeps per sample of the base model.
+    pub substeps: usize,
+    /// Per interior sample: no row of its derivative window is on the ground (see
+    /// [`GROUND_CLEARANCE`]); the others are left out of every fit and score.
+    pub airborne: Vec<bool>,
+    /// How `r` compares model and data (the kernel is the identity for `Pointwise`).
+    pub residual: ResidualKind,
+}
+
+impl SegData {
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Interior samples (those with residuals).
+    pub fn interior(&self) -> std::ops::Range<usize> {
+        self.h..self.len() - self.h
+    }
+}
+
+/// A row with z at or below this (m) is taken as on the ground (LOG_FORMAT.md's z is the height,
+/// ground at 0): ground contact forces are not flight dynamics, and simulated logs of a heavy
+/// vehicle rest there.
+pub const GROUND_CLEARANCE: f64 = 0.02;
+
+/// The raw data and, if any row is stale, the copy with stale rows interpolated.
+pub(crate) struct Prepared {
+    pub raw: Vec<SegData>,
+    pub destaled: Option<Vec<SegData>>,
+}
+
+impl Prepared {
+    pub fn variant(&self, destaled: bool) -> &[SegData] {
+        match (&self.destaled, destaled) {
+            (Some(d), true) => d,
+            _ => &self.raw,
+        }
+    }
+
+    /// Stale rows in the training (false) or held-out (true) data.
+    pub fn stale_rows(&self, holdout: bool) -> (usize, usize) {
+        let segs = self.raw.iter().filter(|s| s.holdout == holdout);
+        segs.fold((0, 0), |(st, n), s| {
+            (st + s.stale.iter().filter(|b| **b).count(), n + s.len())
+        })
+    }
+}
+
+/// Flight time of every row of every segment of `log`: t − t₀ of the log, continued over
+/// segments; when a segment's clock goes back, it continues from the previous segment's end.
+fn flight_times(log: &FlightLog) -> Vec<Vec<f64>> {
+    let mut out = Vec::new();
+    let mut origin = log.segments.first().and_then(|s| s.t.first()).copied().unwrap_or(0.0);
+    let (mut prev_end, mut prev_flight) = (f64::NEG_INFINITY, 0.0);
+    for seg in &log.segments {
+        let Some(&t0) = seg.t.first() else {
+            out.push(Vec::new());
+            continue;
+        };
+        if t0 <= prev_end {
+            let step = median(&seg.t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>()).unwrap_or(0.0);
+            origin = t0 - (prev_flight + step);
+        }
+        let tf: Vec<f64> = seg.t.iter().map(|t| t - origin).collect();
+        prev_end = *seg.t.last().unwrap_or(&t0);
+        prev_flight = *tf.last().unwrap_or(&0.0);
+        out.push(tf);
+    }
+    out
+}
+
+/// Everything of one stretch of rows except what is computed from the states.
+struct Rows<'a> {
+    source: &'a str,
+    log: usize,
+    holdout: bool,
+    segment: usize,
+    part: usize,
+    t: &'a [f64],
+    x: &'a [[f64; 12]],
+    u: &'a [[f64; 4]],
+    volt: Option<&'a [f64]>,
+    flight_time: &'a [f64],
+}
+
+fn build(
+    base: &Base,
+    savgol: &SavGol,
+    residual: ResidualKind,
+    rows: &Rows,
+    interpolate: bool,
+) -> Result<SegData, DiagnoseError> {
+    let n = rows.t.len();
+    let steps: Vec<f64> = rows.t.windows(2).map(|w| w[1] - w[0]).collect();
+    let dt = median(&steps).unwrap_or(0.0);
+    let stale = stale_flags(rows.x);
+    let x = if interpolate {
+        destale(rows.t, rows.x, &stale)
+    } else {
+        rows.x.to_vec()
+    };
+    let err = |e: crate::identify::preprocess::PreprocessError| DiagnoseError::Data {
+        file: rows.source.to_string(),
+        message: format!("segment {}: {e}", rows.segment),
+    };
+    let dx_all = try_columnwise(&x, |y| savgol.try_derivative(y, dt)).map_err(err)?;
+    let h = savgol.half_window();
+    let dx: Vec<[f64; 6]> = dx_all[h..n - h]
+        .iter()
+        .map(|d| std::array::from_fn(|c| d[6 + c]))
+        .collect();
+    let m = base.substeps(dt, rows.source)?;
+    let f: Vec<[f64; 12]> = x.iter().zip(rows.u).map(|(x, u)| base.f(x, u)).collect();
+    let (w, r) = match residual {
+        ResidualKind::Matched => {
+            // One-step errors (x_{m+1} − F(x_m, u_m))/Δt of vx..yaw_rate, m = 0..n−2.
+            let mut e = vec![[0.0; 6]; n];
+            for k in 0..n - 1 {
+                let next = base.step(&x[k], &rows.u[k], dt, m);
+                e[k] = std::array::from_fn(|c| (x[k + 1][6 + c] - next[6 + c]) / dt);
+            }
+            let w = kernel(savgol, dt);
+            let r = filter(&w, &e, n);
+            (w, r)
+        }
+        ResidualKind::Pointwise => {
+            let r = (h..n - h)
+                .map(|k| std::array::from_fn(|c| dx_all[k][6 + c] - f[k][6 + c]))
+                .collect();
+            (impulse(h), r)
+        }
+    };
+    let t0 = rows.t[0];
+    let ground: Vec<bool> = x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
+    let airborne = (h..n - h).map(|k| !ground[k - h..=k + h].iter().any(|g| *g)).collect();
+    Ok(SegData {
+        log: rows.log,
+        holdout: rows.holdout,
+        segment: rows.segment,
+        part: rows.part,
+        dt,
+        t: rows.t.to_vec(),
+        x,
+        u: rows.u.to_vec(),
+        volt: rows.volt.map(<[f64]>::to_vec),
+        stale,
+        flight_time: rows.flight_time.to_vec(),
+        segment_time: rows.t.iter().map(|t| t - t0).collect(),
+        h,
+        kernel: w,
+        dx,
+        f,
+        r,
+        substeps: m,
+        airborne,
+        residual,
+    })
+}
+
+/// Prepare the training and held-out logs. Segments shorter than `min_rows` (at least the
+/// Savitzky-Golay window + 1) are skipped; with `split` > 1 every training segment is cut into
+/// that many parts (cross-validation on a single segment).
+pub(crate) fn prepare(
+    base: &Base,
+    savgol: &SavGol,
+    residual: ResidualKind,
+    train: &[FlightLog],
+    holdout: &[FlightLog],
+    split: usize,
+) -> Result<Prepared, DiagnoseError> {
+    let min_rows = savgol.window + 2;
+    let mut stretches = Vec::new();
+    for (holdout_flag, logs) in [(false, train), (true, holdout)] {
+        for (li, log) in logs.iter().enumerate() {
+            let times = flight_times(log);
+            for (si, seg) in log.segments.iter().enumerate() {
+                let parts = if holdout_flag { 1 } else { split.max(1) };
+                let len = seg.len() / parts;
+                for p in 0..parts {
+                    let lo = p * len;
+                    let hi = if p + 1 == parts { seg.len() } else { lo + len };
+                    if hi - lo < min_rows {
+                        continue;
+                    }
+                    stretches.push((holdout_flag, li, log, si, p, lo..hi, times[si].clone()));
+                }
+            }
+        }
+    }
+    let mut raw = Vec::new();
+    let mut any_stale = false;
+    for (holdout_flag, li, log, si, p, range, tf) in &stretches {
+        let seg = &log.segments[*si];
+        let rows = Rows {
+            source: &log.source,
+            log: *li,
+            holdout: *holdout_flag,
+            segment: *si,
+            part: *p,
+            t: &seg.t[range.clone()],
+            x: &seg.x[range.clone()],
+            u: &seg.u[range.clone()],
+            volt: seg.battery_voltage.as_deref().map(|v| &v[range.clone()]),
+            flight_time: &tf[range.clone()],
+        };
+        let d = build(base, savgol, residual, &rows, false)?;
+        any_stale |= d.stale.iter().any(|s| *s);
+        raw.push(d);
+    }
+    let destaled = if any_stale {
+        let mut out = Vec::new();
+        for (holdout_flag, li, log, si, p, range, tf) in &stretches {
+            let seg = &log.segments[*si];
+            let rows = Rows {
+                source: &log.source,
+                log: *li,
+                holdout: *holdout_flag,
+                segment: *si,
+                part: *p,
+                t: &seg.t[range.clone()],
+                x: &seg.x[range.clone()],
+                u: &seg.u[range.clone()],
+                volt: seg.battery_voltage.as_deref().map(|v| &v[range.clone()]),
+                flight_time: &tf[range.clone()],
+            };
+            out.push(build(base, savgol, residual, &rows, true)?);
+        }
+        Some(out)
+    } else {
+        None
+    };
+    Ok(Prepared { raw, destaled })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flight_time_continues_over_a_clock_reset() {
+        let text =
+            "t,x,y,z,roll,pitch,yaw,vx,vy,vz,roll_rate,pitch_rate,yaw_rate,u_vz,u_roll,u_pitch,u_yaw_rate,segment\n\
+            10,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0\n11,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0\n\
+            20,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,1\n21,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,1\n\
+            0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,2\n1,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,2\n";
+        let log = crate::logs::parse_log(text, "t.csv").unwrap();
+        let tf = flight_times(&log);
+        assert_eq!(tf, vec![vec![0.0, 1.0], vec![10.0, 11.0], vec![12.0, 13.0]]);
+    }
+}

@@ -1,0 +1,607 @@
+//! `uavgen diagnose`: where a model parts from flight data, which catalogued effect explains the
+//! gap, how far adding it shrinks the gap on held-out data, and the corrected model. See
+//! docs/diagnose.md.
+//!
+//! 1. **Where** ([`where_link`]): the base model's residuals (one-step and over the horizon) on the
+//!    training logs, analysed by [`crate::analysis`].
+//! 2. **Which effect** ([`catalogue`], [`candidate`], [`select`]): every catalogued effect is
+//!    fitted on the training logs as an augmentation of the base model and scored on held-out data
+//!    (`--holdout` logs, else cross-validation); significant effects are named greedily.
+//! 3. **How far it shrinks** ([`shrink`]): one-step and horizon RMSE and d₁ per state, before and
+//!    after, on held-out data.
+//! 4. **The corrected model** ([`corrected`]): the model file with a `corrections` block.
+//!
+//! ```no_run
+//! use uavgen::diagnose::{diagnose, DiagnoseOptions};
+//! let model = uavgen::load("base.json".as_ref()).unwrap();
+//! let train = vec![uavgen::logs::read_log("drag_train.csv".as_ref()).unwrap()];
+//! let test = vec![uavgen::logs::read_log("drag_test.csv".as_ref()).unwrap()];
+//! let d = diagnose(&model, &train, &test, &DiagnoseOptions::default()).unwrap();
+//! println!("verdict: {:?}", d.verdict);
+//! d.write("diagnosis".as_ref(), false).unwrap();
+//! ```
+
+mod augmented;
+mod candidate;
+pub mod catalogue;
+mod corrected;
+mod data;
+mod design;
+mod envelope;
+pub mod fit;
+mod plots;
+mod report_json;
+mod report_md;
+mod residuals;
+pub mod score;
+mod select;
+mod shrink;
+mod where_link;
+mod write;
+
+pub use catalogue::EffectKind;
+pub use report_json::{EffectReport, InputScan, RoundEntry, RoundReport};
+pub use residuals::ResidualKind;
+pub use score::Rules;
+pub use shrink::{ClosedLoop, Shrink, Side, StateShrink};
+
+use crate::analysis::{WhereInput, WhereReport};
+use crate::identify::preprocess::SavGol;
+use crate::logs::{FlightLog, INPUT_COLUMNS};
+use crate::model::{Corrections, Model};
+use augmented::Augmented;
+use catalogue::linear::Context;
+use serde::Serialize;
+use std::path::PathBuf;
+
+/// Settings of the diagnosis. `Default` gives the documented values.
+#[derive(Clone, Debug, Serialize)]
+pub struct DiagnoseOptions {
+    /// Savitzky-Golay differentiation of the logs (window 9, order 3).
+    pub savgol: SavGol,
+    /// How model and data are compared (default: the matched filter; docs/diagnose.md).
+    pub residual: ResidualKind,
+    /// Free-run horizon in samples (30, the MPC's).
+    pub horizon: usize,
+    /// RK4 substeps per sample; `None`: the code generator's automatic rule.
+    pub substeps: Option<usize>,
+    /// g of the thrust corrections; `None`: the PD model's gravity, else 9.81 m/s².
+    pub gravity: Option<f64>,
+    /// Rotor radius R of the ground effect, m (0.1651, the Matrice 100's).
+    pub rotor_radius: f64,
+    /// Largest delay scanned, in samples (10).
+    pub max_delay_samples: f64,
+    /// Time constants scanned for the actuator lag, s (24 values from 0.01 to 1 s, logarithmic).
+    pub lag_grid: Vec<f64>,
+    /// Cross-validation parts of a lone training segment when there is no held-out log (4).
+    pub folds: usize,
+    /// When an effect is significant.
+    pub rules: Rules,
+    /// The candidates evaluated (default: the whole catalogue).
+    pub candidates: Vec<EffectKind>,
+    /// Run the "where" analysis (default true).
+    pub where_analysis: bool,
+    /// The text of the model file, for corrected.json; `None`: read from the model's source path.
+    #[serde(skip)]
+    pub model_text: Option<String>,
+    /// The `source` of the corrections block (default `uavgen diagnose`).
+    pub source: Option<String>,
+    /// A plant file for the closed-loop comparison (pending: recorded, not used yet).
+    pub plant: Option<PathBuf>,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        Self {
+            savgol: SavGol { window: 9, order: 3 },
+            residual: ResidualKind::Matched,
+            horizon: 30,
+            substeps: None,
+            gravity: None,
+            rotor_radius: 0.1651,
+            max_delay_samples: 10.0,
+            lag_grid: catalogue::inputs::lag_grid(0.01, 1.0, 24),
+            folds: 4,
+            rules: Rules::default(),
+            candidates: EffectKind::ALL.to_vec(),
+            where_analysis: true,
+            model_text: None,
+            source: None,
+            plant: None,
+        }
+    }
+}
+
+/// Why a diagnosis could not be made or written.
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnoseError {
+    #[error("model `{model}` has {nx} states and {nu} inputs, but flight logs have 12 states and 4 inputs")]
+    Dimensions { model: String, nx: usize, nu: usize },
+    #[error("model `{model}` already has a `corrections` block; diagnose its base model (the file without the block)")]
+    HasCorrections { model: String },
+    #[error("no training logs")]
+    NoLogs,
+    #[error("{what}: no segment has at least {rows} rows (the Savitzky-Golay window + 2)")]
+    NoData { what: String, rows: usize },
+    #[error("{file}: {message}")]
+    Data { file: String, message: String },
+    #[error("{file}: choosing RK4 substeps for Δt = {dt} s: {message}")]
+    Substeps { file: String, dt: f64, message: String },
+    #[error("invalid option: {0}")]
+    Options(String),
+    #[error("the corrected model: {0}")]
+    Corrected(String),
+    #[error("{path}: {message}")]
+    Write { path: String, message: String },
+}
+
+/// A log in the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct LogSummary {
+    pub source: String,
+    pub rows: usize,
+    pub segments: usize,
+    /// Rows repeating the previous row's states.
+    pub stale_rows: usize,
+    /// Samples with residuals (segment interiors; parts shorter than the window are skipped).
+    pub samples: usize,
+}
+
+/// Which held-out data scored the candidates.
+#[derive(Clone, Debug, Serialize)]
+pub struct Holdout {
+    /// `"logs"` (the `--holdout` logs) or `"cross-validation"`.
+    pub mode: String,
+    pub logs: Vec<LogSummary>,
+    /// Cross-validation folds (1 with held-out logs).
+    pub folds: usize,
+    /// How the folds were formed.
+    pub description: String,
+    /// Fraction of the held-out samples inside the training envelope, which alone score the
+    /// candidates (1 in cross-validation; docs/diagnose.md).
+    pub scored_fraction: f64,
+}
+
+/// The model in the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct ModelSummary {
+    pub name: String,
+    pub kind: String,
+    pub file: String,
+    pub sha256: String,
+    pub gravity: f64,
+}
+
+/// The result of [`diagnose`].
+#[derive(Clone, Debug, Serialize)]
+pub struct Diagnosis {
+    pub model: ModelSummary,
+    pub logs: Vec<LogSummary>,
+    pub holdout: Holdout,
+    /// Every candidate evaluated: the named ones first (in the order named, with the figures of
+    /// the round that named them), then the others by score (figures of the last round).
+    pub effects: Vec<EffectReport>,
+    /// The named effects in order, or `["none"]`.
+    pub verdict: Vec<String>,
+    pub shrink: Shrink,
+    #[serde(rename = "where")]
+    pub where_report: Option<WhereReport>,
+    /// The greedy selection round by round.
+    pub rounds: Vec<RoundReport>,
+    /// The block written into corrected.json.
+    pub corrections: Corrections,
+    /// corrected.json: the model file with the corrections block (null if the model text was not
+    /// available; see [`Diagnosis::corrected_from`]).
+    #[serde(skip)]
+    pub corrected: serde_json::Value,
+    pub notes: Vec<String>,
+    pub options: DiagnoseOptions,
+    #[serde(skip)]
+    where_input: Option<WhereInput>,
+}
+
+/// The model text with `corrections` attached, as a JSON value.
+fn corrected_value(text: &str, label: &str, corrections: &Corrections) -> Result<serde_json::Value, DiagnoseError> {
+    let corrected = crate::model::attach_corrections(text, label, corrections)
+        .map_err(|e| DiagnoseError::Corrected(e.to_string()))?;
+    serde_json::from_str(&corrected).map_err(|e| DiagnoseError::Corrected(e.to_string()))
+}
+
+impl Diagnosis {
+    /// Set [`Diagnosis::corrected`] from the model file's text (when it was not available).
+    pub fn corrected_from(&mut self, model_text: &str) -> Result<(), DiagnoseError> {
+        self.corrected = corrected_value(model_text, &self.model.file, &self.corrections)?;
+        Ok(())
+    }
+}
+
+/// Progress of [`diagnose_with_progress`].
+#[derive(Clone, Debug)]
+pub struct Progress<'a> {
+    /// Candidate evaluations done and the total known so far (it grows by round).
+    pub done: usize,
+    pub total: usize,
+    /// What is being done.
+    pub what: &'a str,
+}
+
+fn summaries(logs: &[FlightLog], data: &[data::SegData], holdout: bool) -> Vec<LogSummary> {
+    logs.iter()
+        .enumerate()
+        .map(|(i, l)| LogSummary {
+            source: l.source.clone(),
+            rows: l.rows(),
+            segments: l.segments.len(),
+            stale_rows: l.report.stale_states(),
+            samples: data
+                .iter()
+                .filter(|s| s.holdout == holdout && s.log == i)
+                .map(|s| s.dx.len())
+                .sum(),
+        })
+        .collect()
+}
+
+fn check(model: &Model, train: &[FlightLog], options: &DiagnoseOptions) -> Result<(), DiagnoseError> {
+    if model.corrections.is_some() {
+        return Err(DiagnoseError::HasCorrections {
+            model: model.name.clone(),
+        });
+    }
+    if model.nx() != 12 || model.nu() != 4 {
+        return Err(DiagnoseError::Dimensions {
+            model: model.name.clone(),
+            nx: model.nx(),
+            nu: model.nu(),
+        });
+    }
+    if train.is_empty() {
+        return Err(DiagnoseError::NoLogs);
+    }
+    options
+        .savgol
+        .validate()
+        .map_err(|e| DiagnoseError::Options(format!("Savitzky-Golay: {e}")))?;
+    let bad = |what: &str| Err(DiagnoseError::Options(what.to_string()));
+    if options.horizon == 0 {
+        return bad("the horizon must be at least 1 sample");
+    }
+    if options.substeps == Some(0) {
+        return bad("the number of RK4 substeps must be at least 1");
+    }
+    if !(options.rotor_radius.is_finite() && options.rotor_radius > 0.0) {
+        return bad("the rotor radius must be a positive number of metres");
+    }
+    if !(options.max_delay_samples.is_finite() && options.max_delay_samples >= 1.0) {
+        return bad("the largest delay must be at least 1 sample");
+    }
+    if options.lag_grid.is_empty() || options.lag_grid.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+        return bad("the lag grid must hold positive time constants");
+    }
+    if options.folds < 2 {
+        return bad("cross-validation needs at least 2 folds");
+    }
+    if options.gravity.is_some_and(|g| !(g.is_finite() && g > 0.0)) {
+        return bad("gravity must be a positive number");
+    }
+    Ok(())
+}
+
+/// Diagnose `model` on the `train` logs, scoring on the `holdout` logs (cross-validation over the
+/// training logs when empty).
+pub fn diagnose(
+    model: &Model,
+    train: &[FlightLog],
+    holdout: &[FlightLog],
+    options: &DiagnoseOptions,
+) -> Result<Diagnosis, DiagnoseError> {
+    diagnose_with_progress(model, train, holdout, options, &mut |_| {})
+}
+
+/// [`diagnose`] reporting progress over the candidate evaluations.
+pub fn diagnose_with_progress(
+    model: &Model,
+    train: &[FlightLog],
+    holdout: &[FlightLog],
+    options: &DiagnoseOptions,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Diagnosis, DiagnoseError> {
+    check(model, train, options)?;
+    let base = residuals::Base::new(model, options.substeps, options.gravity);
+    let ctx = Context {
+        gravity: base.gravity,
+        rotor_radius: options.rotor_radius,
+    };
+    // A lone training segment without held-out logs is cut into parts for cross-validation.
+    let train_segments: usize = train.iter().map(|l| l.segments.len()).sum();
+    let split = if holdout.is_empty() && train_segments < 2 {
+        options.folds
+    } else {
+        1
+    };
+    progress(Progress {
+        done: 0,
+        total: 0,
+        what: "preparing the data",
+    });
+    let data = data::prepare(&base, &options.savgol, options.residual, train, holdout, split)?;
+    let rows = options.savgol.window + 2;
+    if !data.raw.iter().any(|s| !s.holdout) {
+        return Err(DiagnoseError::NoData {
+            what: "the training logs".into(),
+            rows,
+        });
+    }
+    if !holdout.is_empty() && !data.raw.iter().any(|s| s.holdout) {
+        return Err(DiagnoseError::NoData {
+            what: "the held-out logs".into(),
+            rows,
+        });
+    }
+    let (fits, cv) = select::folds(&data);
+    if cv && fits.len() < 3 {
+        return Err(DiagnoseError::NoData {
+            what: "cross-validation (no held-out logs): at least two parts".into(),
+            rows,
+        });
+    }
+    let mut input_rows = [[false; 6]; 4];
+    for j in 0..4 {
+        for c in 0..6 {
+            input_rows[j][c] = !base.ir.graph.is_zero(base.ir.fu[6 + c][j]);
+        }
+    }
+    let mut floor = [0.0; 6];
+    let count: usize = data.raw.iter().map(|s| s.dx.len()).sum();
+    for seg in &data.raw {
+        for d in &seg.dx {
+            for c in 0..6 {
+                floor[c] += d[c] * d[c] / count.max(1) as f64;
+            }
+        }
+    }
+    let floor = floor.map(|ms| 1e-16 * ms);
+    // Held-out samples outside the training envelope are not scored (all are in cross-validation).
+    let (mask, inside) = if cv {
+        (data.raw.iter().map(|s| s.airborne.clone()).collect(), 1.0)
+    } else {
+        envelope::masks(&data.raw)
+    };
+    let problem = select::Problem {
+        base: &base,
+        data: &data,
+        fits,
+        cv,
+        ctx,
+        options,
+        input_rows,
+        floor,
+        mask,
+    };
+    let (state, rounds) = select::select(
+        &problem,
+        &options.candidates,
+        &options.rules,
+        &mut |done, total, what| progress(Progress { done, total, what }),
+    );
+
+    // Parameters of the named effects: the final fit; per fold for the cross-validated shrink.
+    let fin = problem.final_fit();
+    let (linear, mut notes) = corrected::linear_parameters(&state, &state.theta[fin]);
+    let source = options
+        .source
+        .clone()
+        .unwrap_or_else(|| format!("uavgen {} diagnose", env!("CARGO_PKG_VERSION")));
+    let inputs: Vec<String> = INPUT_COLUMNS.iter().map(|s| s.to_string()).collect();
+    let corrections = corrected::corrections(&state, &linear, &inputs, options.rotor_radius, source);
+
+    // Shrink on the held-out data of every test fit.
+    progress(Progress {
+        done: 0,
+        total: 0,
+        what: "shrink: free runs before and after",
+    });
+    let plain = Augmented::plain(&base, ctx);
+    let (mut before, mut after) = (shrink::Pool::default(), shrink::Pool::default());
+    for i in problem.test_fits() {
+        let (lin, _) = corrected::linear_parameters(&state, &state.theta[i]);
+        let aug = Augmented {
+            base: &base,
+            ctx,
+            linear: lin,
+            transform: state.transform,
+        };
+        for &s in &problem.fits[i].test {
+            before.add(&plain, &data.raw[s], options.horizon);
+            after.add(&aug, &data.variant(state.destale)[s], options.horizon);
+        }
+    }
+    let verdict: Vec<String> = if state.named.is_empty() {
+        vec!["none".to_string()]
+    } else {
+        state.named.iter().map(|k| k.name().to_string()).collect()
+    };
+    let shrink = Shrink::new(
+        if cv {
+            format!(
+                "cross-validation: each of {} folds' held-out segments, parameters fitted on the others",
+                problem.fits.len() - 1
+            )
+        } else {
+            "held-out logs".to_string()
+        },
+        state.named.iter().map(|k| k.name().to_string()).collect(),
+        options.horizon,
+        before.side(),
+        after.side(),
+        ClosedLoop {
+            status: "pending".to_string(),
+            plant: options.plant.as_ref().map(|p| p.display().to_string()),
+            note: "the closed-loop comparison through `uavgen track` on a plant file is not wired yet".to_string(),
+        },
+    );
+
+    // Where: the base model's residuals on the training logs.
+    let where_input = options.where_analysis.then(|| {
+        progress(Progress {
+            done: 0,
+            total: 0,
+            what: "where: residual analysis",
+        });
+        let segs: Vec<&data::SegData> = data.raw.iter().filter(|s| !s.holdout).collect();
+        where_link::where_input(&plain, &segs, options.horizon, train)
+    });
+    let where_report = where_input.as_ref().map(where_link::where_report);
+
+    // The effects: named ones with their round's figures, the others from the last round.
+    // Named effects report the final parameters (after the backfitting of later rounds).
+    let mut effects = Vec::new();
+    for (r, round) in rounds.iter().enumerate() {
+        if let Some(named) = round.named {
+            let c = round
+                .candidates
+                .iter()
+                .find(|c| c.kind == named)
+                .expect("named candidate");
+            let mut e = report_json::effect_report(c, r + 1, true, options.rotor_radius);
+            if let Some((_, v)) = linear.iter().find(|(k, _)| *k == named) {
+                e.parameters = report_json::linear_value(named, v, Some(options.rotor_radius));
+            }
+            let inputs: Vec<(usize, f64)> = (0..4)
+                .filter_map(|j| match named {
+                    EffectKind::Latency => (state.transform.delay[j] > 0.0).then_some((j, state.transform.delay[j])),
+                    EffectKind::ActuatorLag => state.transform.lag[j].map(|t| (j, t)),
+                    _ => None,
+                })
+                .collect();
+            if !inputs.is_empty() {
+                e.parameters = report_json::input_value(&inputs);
+            }
+            effects.push(e);
+        }
+    }
+    if let Some(last) = rounds.last() {
+        let mut rest: Vec<_> = last
+            .candidates
+            .iter()
+            .filter(|c| !state.named.contains(&c.kind))
+            .collect();
+        rest.sort_by(|a, b| a.delta_bic_test.total_cmp(&b.delta_bic_test));
+        let r = rounds.len();
+        effects.extend(
+            rest.into_iter()
+                .map(|c| report_json::effect_report(c, r, false, options.rotor_radius)),
+        );
+    }
+    let rounds_report = rounds
+        .iter()
+        .enumerate()
+        .map(|(r, round)| {
+            let mut candidates: Vec<RoundEntry> = round
+                .candidates
+                .iter()
+                .map(|c| RoundEntry {
+                    name: c.kind.name().to_string(),
+                    score: c.delta_bic_test,
+                    heldout_reduction: c.reduction,
+                    z: c.z,
+                    significant: c.significant,
+                })
+                .collect();
+            candidates.sort_by(|a, b| a.score.total_cmp(&b.score));
+            RoundReport {
+                round: r + 1,
+                named: round.named.map(|k| k.name().to_string()),
+                candidates,
+            }
+        })
+        .collect();
+    // The ground effect reaches 1 % of the thrust at z = (R/4)√99 ≈ 2.5 R: below that only.
+    if options.candidates.contains(&EffectKind::GroundEffect) {
+        let lowest = data
+            .raw
+            .iter()
+            .filter(|s| !s.holdout)
+            .flat_map(|s| {
+                s.interior()
+                    .filter(|&k| s.airborne[k - s.h])
+                    .map(move |k| s.x[k][2].abs())
+            })
+            .fold(f64::INFINITY, f64::min);
+        let one_percent = options.rotor_radius / 4.0 * 99f64.sqrt();
+        if lowest > one_percent {
+            notes.push(format!(
+                "the training logs never fly below z = {lowest:.2} m; the ground effect reaches 1 % of the thrust \
+                 only below {one_percent:.2} m (rotor radius {} m), so ground_effect can hardly be detected in them",
+                options.rotor_radius
+            ));
+        }
+    }
+    if state.named.contains(&EffectKind::StaleSamples) {
+        notes.push(
+            "stale_samples is about the data, not the model: corrected.json has no entry for it; treat repeated \
+             rows as missing (interpolate them) before identifying or evaluating a model on these logs"
+                .to_string(),
+        );
+    }
+    if state.named.contains(&EffectKind::Latency) {
+        notes.push(
+            "latency is written as input delays (corrections.latency): the runtime compensates them, they are not \
+             part of f"
+                .to_string(),
+        );
+    }
+
+    // corrected.json (null when the model text is not at hand: see `Diagnosis::corrected_from`).
+    let text = options
+        .model_text
+        .clone()
+        .or_else(|| std::fs::read_to_string(&model.source.file).ok());
+    let corrected = match &text {
+        Some(t) => corrected_value(t, &model.source.file, &corrections)?,
+        None => {
+            notes.push(format!(
+                "corrected.json needs the model file's text ({} not found from here): pass \
+                 DiagnoseOptions::model_text or call Diagnosis::corrected_from",
+                model.source.file
+            ));
+            serde_json::Value::Null
+        }
+    };
+
+    Ok(Diagnosis {
+        model: ModelSummary {
+            name: model.name.clone(),
+            kind: model.kind_name().to_string(),
+            file: model.source.file.clone(),
+            sha256: model.source.sha256.clone(),
+            gravity: base.gravity,
+        },
+        logs: summaries(train, &data.raw, false),
+        holdout: Holdout {
+            mode: if cv { "cross-validation" } else { "logs" }.to_string(),
+            logs: summaries(holdout, &data.raw, true),
+            folds: if cv { problem.fits.len() - 1 } else { 1 },
+            description: if !cv {
+                "fitted on the training logs, scored on the held-out logs".to_string()
+            } else if train.len() >= 2 {
+                "leave one training log out".to_string()
+            } else if split > 1 {
+                format!("the lone training segment cut into {split} consecutive parts, leave one part out")
+            } else {
+                "leave one training segment out".to_string()
+            },
+            scored_fraction: inside,
+        },
+        effects,
+        verdict,
+        shrink,
+        where_report,
+        rounds: rounds_report,
+        corrections,
+        corrected,
+        notes,
+        options: options.clone(),
+        where_input,
+    })
+}

@@ -1,0 +1,240 @@
+//! How far the gap shrinks: the base model and the model with the named effects, on held-out data,
+//! per state and overall — one-step derivative (vx..yaw_rate, the filtered residual of
+//! [`super::residuals`], but stepping the corrected model exactly) and free runs over the horizon
+//! from every sample (all 12 states, yaw errors wrapped), RMSE and d₁ (`crate::metrics`).
+
+use super::augmented::Augmented;
+use super::catalogue::CHANNELS;
+use super::data::{SegData, GROUND_CLEARANCE};
+use super::residuals::{filter, ResidualKind};
+use crate::evaluate::{wrap_angle, DIVERGENCE_BOUND};
+use crate::logs::{STATE_COLUMNS, YAW};
+use crate::metrics::{compare, Metrics};
+use serde::Serialize;
+
+/// Predictions pooled over segments.
+#[derive(Default)]
+pub(crate) struct Pool {
+    one_pred: Vec<[f64; 6]>,
+    one_obs: Vec<[f64; 6]>,
+    hor_pred: Vec<[f64; 12]>,
+    hor_obs: Vec<[f64; 12]>,
+    end_pred: Vec<[f64; 12]>,
+    end_obs: Vec<[f64; 12]>,
+    step_sq: Vec<f64>,
+    step_n: Vec<usize>,
+    runs: usize,
+    diverged: usize,
+}
+
+fn finite(x: &[f64]) -> bool {
+    x.iter().all(|v| v.is_finite() && v.abs() <= DIVERGENCE_BOUND)
+}
+
+/// The filtered one-step residual of the augmented model on `seg` (interior samples).
+pub(crate) fn one_step_residual(aug: &Augmented, seg: &SegData) -> Vec<[f64; 6]> {
+    let n = seg.len();
+    let seen = aug.seen_inputs(seg);
+    let m = aug.substeps(seg.dt, seg.substeps);
+    if seg.residual == ResidualKind::Pointwise {
+        return seg
+            .interior()
+            .zip(&seg.dx)
+            .map(|(k, d)| {
+                let f = aug.f(&seg.x[k], &seen.s[k], seg.flight_time[k], &seen.v[k]);
+                std::array::from_fn(|c| d[c] - f[6 + c])
+            })
+            .collect();
+    }
+    let mut e = vec![[0.0; 6]; n];
+    for k in 0..n - 1 {
+        let (next, _) = aug.step(&seg.x[k], &seen.s[k], seg.flight_time[k], &seen.v[k], seg.dt, m);
+        e[k] = std::array::from_fn(|c| (seg.x[k + 1][6 + c] - next[6 + c]) / seg.dt);
+    }
+    filter(&seg.kernel, &e, n)
+}
+
+/// A free run of `len` samples from row k: the predictions for rows k+1..=k+len (fewer if it
+/// diverged).
+pub(crate) fn run(
+    aug: &Augmented,
+    seg: &SegData,
+    seen: &super::augmented::SeenInputs,
+    k: usize,
+    len: usize,
+) -> Vec<[f64; 12]> {
+    let m = aug.substeps(seg.dt, seg.substeps);
+    let (mut x, mut s) = (seg.x[k], seen.s[k]);
+    let mut out = Vec::with_capacity(len);
+    for j in 0..len {
+        let (nx, ns) = aug.step(&x, &s, seg.flight_time[k + j], &seen.v[k + j], seg.dt, m);
+        if !finite(&nx) {
+            break;
+        }
+        out.push(nx);
+        x = nx;
+        s = ns;
+    }
+    out
+}
+
+fn wrapped(p: &[f64; 12], o: &[f64; 12]) -> [f64; 12] {
+    let mut p = *p;
+    p[YAW] = o[YAW] + wrap_angle(p[YAW] - o[YAW]);
+    p
+}
+
+impl Pool {
+    pub fn add(&mut self, aug: &Augmented, seg: &SegData, horizon: usize) {
+        let r = one_step_residual(aug, seg);
+        for ((obs, res), airborne) in seg.dx.iter().zip(&r).zip(&seg.airborne) {
+            let pred: [f64; 6] = std::array::from_fn(|c| obs[c] - res[c]);
+            if *airborne && finite(&pred) {
+                self.one_pred.push(pred);
+                self.one_obs.push(*obs);
+            }
+        }
+        if self.step_sq.len() < horizon {
+            self.step_sq.resize(horizon, 0.0);
+            self.step_n.resize(horizon, 0);
+        }
+        let seen = aug.seen_inputs(seg);
+        let n = seg.len();
+        let ground: Vec<bool> = seg.x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
+        for k in 0..n.saturating_sub(horizon) {
+            if ground[k..=k + horizon].iter().any(|g| *g) {
+                continue;
+            }
+            self.runs += 1;
+            let pred = run(aug, seg, &seen, k, horizon);
+            for (j, p) in pred.iter().enumerate() {
+                let o = &seg.x[k + j + 1];
+                let p = wrapped(p, o);
+                self.step_sq[j] += (0..12).map(|i| (p[i] - o[i]).powi(2)).sum::<f64>();
+                self.step_n[j] += 1;
+                self.hor_pred.push(p);
+                self.hor_obs.push(*o);
+            }
+            if pred.len() == horizon {
+                let o = &seg.x[k + horizon];
+                self.end_pred.push(wrapped(&pred[horizon - 1], o));
+                self.end_obs.push(*o);
+            } else {
+                self.diverged += 1;
+            }
+        }
+    }
+
+    pub fn side(&self) -> Side {
+        let metrics = |p: &[[f64; 12]], o: &[[f64; 12]]| compare(p, o, &STATE_COLUMNS).ok();
+        Side {
+            one_step: compare(&self.one_pred, &self.one_obs, &CHANNELS).ok(),
+            horizon: metrics(&self.hor_pred, &self.hor_obs),
+            horizon_end: metrics(&self.end_pred, &self.end_obs),
+            rmse_by_step: self
+                .step_sq
+                .iter()
+                .zip(&self.step_n)
+                .map(|(s, &n)| (n > 0).then(|| (s / (12 * n) as f64).sqrt()))
+                .collect(),
+            horizon_runs: self.runs,
+            horizon_diverged: self.diverged,
+        }
+    }
+}
+
+/// One model's figures on the held-out data.
+#[derive(Clone, Debug, Serialize)]
+pub struct Side {
+    /// One-step derivative, vx..yaw_rate (null without samples).
+    pub one_step: Option<Metrics>,
+    /// Free runs over the horizon from every sample, all steps pooled, 12 states.
+    pub horizon: Option<Metrics>,
+    /// The same at the last step of the horizon only.
+    pub horizon_end: Option<Metrics>,
+    /// Overall RMSE (12 states pooled) at each step 1..=horizon.
+    pub rmse_by_step: Vec<Option<f64>>,
+    pub horizon_runs: usize,
+    pub horizon_diverged: usize,
+}
+
+/// One state before and after.
+#[derive(Clone, Debug, Serialize)]
+pub struct StateShrink {
+    pub state: String,
+    /// One-step derivative RMSE and d₁ (null for the kinematic states x … yaw).
+    pub one_step_rmse_before: Option<f64>,
+    pub one_step_rmse_after: Option<f64>,
+    pub one_step_d1_before: Option<f64>,
+    pub one_step_d1_after: Option<f64>,
+    /// Horizon free-run RMSE and d₁, all steps pooled.
+    pub horizon_rmse_before: Option<f64>,
+    pub horizon_rmse_after: Option<f64>,
+    pub horizon_d1_before: Option<f64>,
+    pub horizon_d1_after: Option<f64>,
+}
+
+/// The closed-loop comparison through `uavgen track` on a plant file: a hook, not yet wired.
+#[derive(Clone, Debug, Serialize)]
+pub struct ClosedLoop {
+    /// `"pending"`: the comparison is not implemented yet.
+    pub status: String,
+    /// The `--plant` file given, if any.
+    pub plant: Option<String>,
+    pub note: String,
+}
+
+/// The gap before and after the named effects.
+#[derive(Clone, Debug, Serialize)]
+pub struct Shrink {
+    /// Which data: `"held-out logs"` or the cross-validation folds.
+    pub data: String,
+    /// The effects added (the verdict; empty for `none`: then after = before).
+    pub effects: Vec<String>,
+    pub horizon: usize,
+    pub before: Side,
+    pub after: Side,
+    pub per_state: Vec<StateShrink>,
+    pub closed_loop: ClosedLoop,
+}
+
+impl Shrink {
+    pub fn new(
+        data: String,
+        effects: Vec<String>,
+        horizon: usize,
+        before: Side,
+        after: Side,
+        closed_loop: ClosedLoop,
+    ) -> Self {
+        let pick = |m: &Option<Metrics>, name: &str, f: fn(&Metrics, usize) -> f64| {
+            m.as_ref()
+                .and_then(|m| m.names.iter().position(|n| n == name).map(|i| f(m, i)))
+        };
+        let rmse = |m: &Metrics, i: usize| m.rmse[i];
+        let d1 = |m: &Metrics, i: usize| m.d1[i];
+        let per_state = STATE_COLUMNS
+            .iter()
+            .map(|&s| StateShrink {
+                state: s.to_string(),
+                one_step_rmse_before: pick(&before.one_step, s, rmse),
+                one_step_rmse_after: pick(&after.one_step, s, rmse),
+                one_step_d1_before: pick(&before.one_step, s, d1),
+                one_step_d1_after: pick(&after.one_step, s, d1),
+                horizon_rmse_before: pick(&before.horizon, s, rmse),
+                horizon_rmse_after: pick(&after.horizon, s, rmse),
+                horizon_d1_before: pick(&before.horizon, s, d1),
+                horizon_d1_after: pick(&after.horizon, s, d1),
+            })
+            .collect();
+        Self {
+            data,
+            effects,
+            horizon,
+            before,
+            after,
+            per_state,
+            closed_loop,
+        }
+    }
+}
