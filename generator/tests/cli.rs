@@ -612,7 +612,11 @@ fn identify_with_input_delay_writes_the_latency_and_refuses_bad_specs() {
     // The generator reads it: the delays become INPUT_DELAY_SAMPLES = round(delay · 30 Hz).
     let model = uavgen::load(&out).unwrap();
     assert_eq!(model.input_delays(), vec![0.0, 0.1, 0.0, 0.2]);
-    for (spec, named) in [("u_foo=0.1", "unknown input 'u_foo'"), ("-0.1", ">= 0"), ("u_vz=abc", "'abc'")] {
+    for (spec, named) in [
+        ("u_foo=0.1", "unknown input 'u_foo'"),
+        ("-0.1", ">= 0"),
+        ("u_vz=abc", "'abc'"),
+    ] {
         let bad = tmp.path().join("bad.json");
         let o = uavgen(&[
             "identify",

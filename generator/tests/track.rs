@@ -238,7 +238,16 @@ fn models_identified_on_m100_like_track_every_trajectory_within_the_bounds() {
     let work = tmp.path().join("work");
     for (method, extra) in [
         ("pd", vec!["--mass", "2.9"]),
-        ("sindy", vec!["--sweep", "--sweep-values", "16,20,24,32,40,48,64", "--criterion", "bic"]),
+        (
+            "sindy",
+            vec![
+                "--sweep",
+                "--sweep-values",
+                "16,20,24,32,40,48,64",
+                "--criterion",
+                "bic",
+            ],
+        ),
     ] {
         let model = tmp.path().join(format!("{method}.json"));
         let mut args = vec![

@@ -136,11 +136,19 @@ fn parse_input_delay(spec: &str) -> Result<[f64; 4], String> {
         let (name, value) = part
             .split_once('=')
             .ok_or_else(|| bad("expected seconds, or name=seconds pairs separated by commas"))?;
-        let j = INPUTS
-            .iter()
-            .position(|n| *n == name.trim())
-            .ok_or_else(|| bad(&format!("unknown input '{}' (inputs: {})", name.trim(), INPUTS.join(", "))))?;
-        out[j] = check(value.trim().parse().map_err(|_| bad(&format!("'{}' is not a number", value.trim())))?)?;
+        let j = INPUTS.iter().position(|n| *n == name.trim()).ok_or_else(|| {
+            bad(&format!(
+                "unknown input '{}' (inputs: {})",
+                name.trim(),
+                INPUTS.join(", ")
+            ))
+        })?;
+        out[j] = check(
+            value
+                .trim()
+                .parse()
+                .map_err(|_| bad(&format!("'{}' is not a number", value.trim())))?,
+        )?;
     }
     Ok(out)
 }
