@@ -4,23 +4,11 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_owned()
-}
+mod common;
 
-fn uavgen(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_uavgen"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("runs uavgen")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{repo, stderr, uavgen};
 
 fn files_of(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     let mut out = Vec::new();

@@ -4,24 +4,12 @@
 
 use serde_json::Value;
 use std::fs;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
+use std::process::Output;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_owned()
-}
+mod common;
 
-fn uavgen(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_uavgen"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("runs uavgen")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{repo, stderr, uavgen};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()

@@ -2,24 +2,10 @@
 //! generic solver fly the paper's trajectories on the simulator; bad input is refused.
 
 use std::fs;
-use std::path::PathBuf;
-use std::process::{Command, Output};
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_owned()
-}
+mod common;
 
-fn uavgen(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_uavgen"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("runs uavgen")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{stderr, uavgen};
 
 fn report(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()

@@ -1,0 +1,25 @@
+//! What the command-line tests share: the repository root and the `uavgen` binary run from it.
+
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_owned()
+}
+
+/// Run `uavgen ARGS` in the repository root.
+pub fn uavgen(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_uavgen"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("runs uavgen")
+}
+
+/// Its stderr as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
