@@ -60,6 +60,9 @@ pub struct DiagnoseArgs {
     /// Plant file for a closed-loop comparison through `uavgen track` (pending: recorded only).
     #[arg(long)]
     plant: Option<PathBuf>,
+    /// MPC options file of the closed-loop comparison (docs/mpc.md; default: the paper's weights).
+    #[arg(long, requires = "plant")]
+    mpc: Option<PathBuf>,
     /// Compare the model with the derivative pointwise (ẋ_SG − f(x, u), the identification's target)
     /// instead of through the derivative's own filter.
     #[arg(long)]
@@ -137,6 +140,52 @@ fn self_check(args: &DiagnoseArgs) -> Result<(), String> {
         Ok(())
     } else {
         Err("self-check: some cases fail (see the table)".into())
+    }
+}
+
+/// The base and the corrected model flown on `plant` along the paper's trajectories (30 s each).
+fn closed_loop(
+    base: &uavgen::Model,
+    corrected: &serde_json::Value,
+    plant: &std::path::Path,
+    mpc: Option<&std::path::Path>,
+) -> uavgen::diagnose::ClosedLoop {
+    let run = || -> Result<Vec<uavgen::diagnose::ClosedLoopRun>, String> {
+        let plant_file = uavgen::PlantFile::load(plant).map_err(|e| e.to_string())?;
+        let text = serde_json::to_string(corrected).map_err(|e| e.to_string())?;
+        let corrected = uavgen::model::parse(&text, "corrected.json").map_err(|e| e.to_string())?;
+        eprintln!("flying the base and the corrected model on {} ...", plant.display());
+        uavgen::track::compare::compare(
+            base,
+            &corrected,
+            &plant_file,
+            30.0,
+            mpc,
+            std::path::Path::new("target/uavgen-track/diagnose"),
+        )
+    };
+    match run() {
+        Ok(runs) => uavgen::diagnose::ClosedLoop {
+            status: "measured".into(),
+            plant: Some(plant.display().to_string()),
+            note: runs
+                .iter()
+                .map(|r| {
+                    format!(
+                        "{} position RMSE {:.3} → {:.3} m (MAE {:.3} → {:.3})",
+                        r.trajectory, r.rmse_before, r.rmse_after, r.mae_before, r.mae_after
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("; "),
+            runs,
+        },
+        Err(e) => uavgen::diagnose::ClosedLoop {
+            status: "failed".into(),
+            plant: Some(plant.display().to_string()),
+            note: e,
+            runs: Vec::new(),
+        },
     }
 }
 
@@ -240,7 +289,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         }
     );
     let bar = super::identify::progress_bar(0, "candidates");
-    let d = diagnose_with_progress(&model, &train, &holdout, &options, &mut |p| {
+    let mut d = diagnose_with_progress(&model, &train, &holdout, &options, &mut |p| {
         bar.set_length(p.total as u64);
         bar.set_position(p.done as u64);
         bar.set_message(p.what.to_string());
@@ -263,6 +312,10 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
             "held-out horizon RMSE (overall, {} samples): {:.4} → {:.4}",
             d.shrink.horizon, b.overall_rmse, a.overall_rmse
         );
+    }
+    if let Some(plant) = &args.plant {
+        d.shrink.closed_loop = closed_loop(&model, &d.corrected, plant, args.mpc.as_deref());
+        println!("closed loop on {}: {}", plant.display(), d.shrink.closed_loop.note);
     }
     let files = d.write(&args.out, args.force).map_err(|e| e.to_string())?;
     println!("wrote {} files into {}", files.len(), args.out.display());

@@ -87,11 +87,11 @@ pub fn run(args: TrackArgs) -> Result<(), String> {
         ));
     }
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
-    if model.nx() != 12 || model.nu() != 4 {
+    if model.base_nx() != 12 || model.nu() != 4 {
         return Err(format!(
             "{}: uavgen track needs a model with the 12 standard states and 4 inputs (this one has {} and {})",
             args.model.display(),
-            model.nx(),
+            model.base_nx(),
             model.nu()
         ));
     }
@@ -125,7 +125,7 @@ pub fn run(args: TrackArgs) -> Result<(), String> {
     // Everything goes to a scratch directory first, renamed into place at the end.
     let tmp = args.out.with_extension("uavgen-tmp");
     let _ = std::fs::remove_dir_all(&tmp);
-    let result = fly_all(&args, &plant, dt, backend.as_mut(), &tmp);
+    let result = fly_all(&args, &model, &plant, dt, backend.as_mut(), &tmp);
     if let Err(e) = result {
         let _ = std::fs::remove_dir_all(&tmp);
         return Err(e);
@@ -138,7 +138,14 @@ pub fn run(args: TrackArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn fly_all(args: &TrackArgs, plant: &PlantFile, dt: f64, backend: &mut dyn Backend, tmp: &Path) -> Result<(), String> {
+fn fly_all(
+    args: &TrackArgs,
+    model: &uavgen::Model,
+    plant: &PlantFile,
+    dt: f64,
+    backend: &mut dyn Backend,
+    tmp: &Path,
+) -> Result<(), String> {
     let several = args.trajectory.len() > 1;
     let mut summary = Vec::new();
     for &which in &args.trajectory {
@@ -155,9 +162,14 @@ fn fly_all(args: &TrackArgs, plant: &PlantFile, dt: f64, backend: &mut dyn Backe
             ..TrackOptions::default()
         };
         let bar = super::identify::progress_bar((args.duration / dt).round() as usize, which.name());
-        let samples = track::fly(backend, plant, &options, &mut |x, _, _| x.to_vec(), &mut |done, _| {
-            bar.set_position(done as u64)
-        })?;
+        let mut extender = track::StateExtender::new(model, dt)?;
+        let samples = track::fly(
+            backend,
+            plant,
+            &options,
+            &mut |x, t, u| extender.extend(x, t, u),
+            &mut |done, _| bar.set_position(done as u64),
+        )?;
         bar.finish_and_clear();
         let report = TrackReport::new(
             &args.model.display().to_string(),

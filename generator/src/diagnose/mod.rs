@@ -43,7 +43,7 @@ pub use catalogue::EffectKind;
 pub use report_json::{EffectReport, InputScan, RoundEntry, RoundReport};
 pub use residuals::ResidualKind;
 pub use score::Rules;
-pub use shrink::{ClosedLoop, Shrink, Side, StateShrink};
+pub use shrink::{ClosedLoop, ClosedLoopRun, Shrink, Side, StateShrink};
 
 use crate::analysis::{WhereInput, WhereReport};
 use crate::identify::preprocess::SavGol;
@@ -435,9 +435,10 @@ pub fn diagnose_with_progress(
         before.side(),
         after.side(),
         ClosedLoop {
-            status: "pending".to_string(),
+            status: "not run".to_string(),
             plant: options.plant.as_ref().map(|p| p.display().to_string()),
-            note: "the closed-loop comparison through `uavgen track` on a plant file is not wired yet".to_string(),
+            note: "give a plant file (`--plant`) to fly the base and the corrected model in closed loop".to_string(),
+            runs: Vec::new(),
         },
     );
 

@@ -177,11 +177,31 @@ pub struct StateShrink {
 /// The closed-loop comparison through `uavgen track` on a plant file: a hook, not yet wired.
 #[derive(Clone, Debug, Serialize)]
 pub struct ClosedLoop {
-    /// `"pending"`: the comparison is not implemented yet.
+    /// `"not run"` (no `--plant`), `"measured"`, or `"failed"` (the note says why).
     pub status: String,
     /// The `--plant` file given, if any.
     pub plant: Option<String>,
     pub note: String,
+    /// Per trajectory: the tracking error with the base and with the corrected model.
+    pub runs: Vec<ClosedLoopRun>,
+}
+
+/// One trajectory flown with the base and with the corrected model (`uavgen track`, generated
+/// solver through the runtime, the plant's seed 1, from the paper's start state).
+#[derive(Clone, Debug, Serialize)]
+pub struct ClosedLoopRun {
+    pub trajectory: String,
+    pub seconds: f64,
+    /// Overall position RMSE / MAE / d₁ (x, y, z), whole run.
+    pub rmse_before: f64,
+    pub rmse_after: f64,
+    pub mae_before: f64,
+    pub mae_after: f64,
+    pub d1_before: f64,
+    pub d1_after: f64,
+    /// Inputs outside the bounds (must be 0), base and corrected.
+    pub out_of_bounds_before: usize,
+    pub out_of_bounds_after: usize,
 }
 
 /// The gap before and after the named effects.

@@ -9,10 +9,13 @@
 
 pub mod backend;
 pub mod build;
+pub mod compare;
+pub mod extend;
 pub mod plot;
 pub mod report;
 
 pub use backend::{Backend, GenericBackend, HarnessBackend, StepAnswer};
+pub use extend::StateExtender;
 pub use report::{TrackReport, TrackSample};
 
 use crate::sim::{Plant, PlantFile};
