@@ -151,7 +151,9 @@ fn diagnose_writes_the_report_and_a_loadable_corrected_model() {
     let before = sh["before"]["horizon"]["overall_rmse"].as_f64().unwrap();
     let after = sh["after"]["horizon"]["overall_rmse"].as_f64().unwrap();
     assert!(after < 0.7 * before, "horizon RMSE {before} → {after}");
-    assert_eq!(sh["closed_loop"]["status"], "pending");
+    // No --plant: the closed-loop comparison is not run.
+    assert_eq!(sh["closed_loop"]["status"], "not run");
+    assert_eq!(sh["closed_loop"]["runs"].as_array().map(Vec::len), Some(0));
 
     // corrected.json: the model file as it was plus the block; it loads and checks.
     let corrected_text = fs::read_to_string(out.join("corrected.json")).unwrap();

@@ -452,7 +452,9 @@ pub fn diagnose_with_progress(
         let segs: Vec<&data::SegData> = data.raw.iter().filter(|s| !s.holdout).collect();
         where_link::where_input(&plain, &segs, options.horizon, train)
     });
-    let where_report = where_input.as_ref().map(where_link::where_report);
+    let where_report = where_input
+        .as_ref()
+        .map(|input| where_link::where_report(input, options.horizon));
 
     // The effects: named ones with their round's figures, the others from the last round.
     // Named effects report the final parameters (after the backfitting of later rounds).

@@ -70,7 +70,14 @@ pub(crate) fn where_input(base: &Augmented, segs: &[&SegData], horizon: usize, l
     input
 }
 
-/// Run the analysis.
-pub(crate) fn where_report(input: &WhereInput) -> WhereReport {
-    analyse(input, &WhereOptions::default())
+/// Run the analysis; `horizon` is the free-run length of the horizon residuals (it cannot be
+/// inferred from them: they start after the Savitzky-Golay half window).
+pub(crate) fn where_report(input: &WhereInput, horizon: usize) -> WhereReport {
+    analyse(
+        input,
+        &WhereOptions {
+            horizon_steps: Some(horizon),
+            ..WhereOptions::default()
+        },
+    )
 }
