@@ -1,19 +1,16 @@
-//! Subcommands of the `uavgen` binary that drive the identification library.
+//! Subcommands of the `uavgen` binary that drive the library (identification, simulation,
+//! closed loop, diagnosis).
 
+pub mod diagnose;
+pub mod evaluate;
 pub mod identify;
+pub mod simulate;
+pub mod track;
 
 use std::path::Path;
 
-/// Write `text` to `path` atomically (temporary file + rename): nothing partial is left behind.
+/// Write `text` to `path` atomically (temporary file in the same directory + rename): nothing
+/// partial is left behind. The simulator's log writer does the same; one implementation serves both.
 pub fn write_atomically(path: &Path, text: &str) -> Result<(), String> {
-    let tmp = path.with_extension("uavgen-tmp");
-    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("{}: {e}", path.display())
-    })
+    uavgen::sim::write_atomically(path, text).map_err(|e| e.to_string())
 }
-pub mod diagnose;
-pub mod evaluate;
-pub mod simulate;
-pub mod track;
