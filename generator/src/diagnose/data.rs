@@ -229,48 +229,31 @@ pub(crate) fn prepare(
             }
         }
     }
-    let mut raw = Vec::new();
-    let mut any_stale = false;
-    for (holdout_flag, li, log, si, p, range, tf) in &stretches {
-        let seg = &log.segments[*si];
-        let rows = Rows {
-            source: &log.source,
-            log: *li,
-            holdout: *holdout_flag,
-            segment: *si,
-            part: *p,
-            t: &seg.t[range.clone()],
-            x: &seg.x[range.clone()],
-            u: &seg.u[range.clone()],
-            volt: seg.battery_voltage.as_deref().map(|v| &v[range.clone()]),
-            flight_time: &tf[range.clone()],
-        };
-        let d = build(base, savgol, residual, &rows, false)?;
-        any_stale |= d.stale.iter().any(|s| *s);
-        raw.push(d);
-    }
-    let destaled = if any_stale {
-        let mut out = Vec::new();
-        for (holdout_flag, li, log, si, p, range, tf) in &stretches {
-            let seg = &log.segments[*si];
-            let rows = Rows {
-                source: &log.source,
-                log: *li,
-                holdout: *holdout_flag,
-                segment: *si,
-                part: *p,
-                t: &seg.t[range.clone()],
-                x: &seg.x[range.clone()],
-                u: &seg.u[range.clone()],
-                volt: seg.battery_voltage.as_deref().map(|v| &v[range.clone()]),
-                flight_time: &tf[range.clone()],
-            };
-            out.push(build(base, savgol, residual, &rows, true)?);
-        }
-        Some(out)
-    } else {
-        None
+    // The rows of one stretch, built with or without its stale rows.
+    let build_all = |drop_stale: bool| -> Result<Vec<_>, _> {
+        stretches
+            .iter()
+            .map(|(holdout_flag, li, log, si, p, range, tf)| {
+                let seg = &log.segments[*si];
+                let rows = Rows {
+                    source: &log.source,
+                    log: *li,
+                    holdout: *holdout_flag,
+                    segment: *si,
+                    part: *p,
+                    t: &seg.t[range.clone()],
+                    x: &seg.x[range.clone()],
+                    u: &seg.u[range.clone()],
+                    volt: seg.battery_voltage.as_deref().map(|v| &v[range.clone()]),
+                    flight_time: &tf[range.clone()],
+                };
+                build(base, savgol, residual, &rows, drop_stale)
+            })
+            .collect()
     };
+    let raw = build_all(false)?;
+    let any_stale = raw.iter().any(|d| d.stale.iter().any(|s| *s));
+    let destaled = if any_stale { Some(build_all(true)?) } else { None };
     Ok(Prepared { raw, destaled })
 }
 

@@ -24,16 +24,6 @@ impl PlotKind {
     }
 }
 
-fn unit(name: &str) -> &'static str {
-    match name {
-        "x" | "y" | "z" => "m",
-        "roll" | "pitch" | "yaw" => "rad",
-        "vx" | "vy" | "vz" => "m/s",
-        "roll_rate" | "pitch_rate" | "yaw_rate" => "rad/s",
-        _ => "",
-    }
-}
-
 /// Plot the two kinds for every segment of `log` into `dir`: `<stem>_free_run.svg` and
 /// `<stem>_horizon.svg`, where stem is the log's file stem (plus `_s<i>` for segment i when
 /// the log has more than one). Returns the files written.
@@ -113,7 +103,7 @@ pub fn write_svg(
         let measured: Vec<f64> = tr.measured.iter().map(|x| x[i]).collect();
         let predicted: Vec<f64> = runs.iter().flat_map(|(_, r)| r.iter().map(move |x| x[i])).collect();
         let (lo, hi) = y_range(&measured, &predicted);
-        let caption = match unit(&names[i]) {
+        let caption = match crate::analysis::state_unit(&names[i]) {
             "" => names[i].clone(),
             u => format!("{} ({u})", names[i]),
         };
