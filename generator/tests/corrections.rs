@@ -171,6 +171,34 @@ fn actuator_lag_adds_a_first_order_state_that_the_base_model_sees() {
 }
 
 #[test]
+fn acceleration_lag_replaces_a_row_by_its_lag_state() {
+    let model = with(
+        toy(),
+        json!({"actuator_lag": {"u_vz": 0.08}, "acceleration_lag": {"roll_rate": 0.1, "vz": 0.05}}),
+    );
+    // Input lags, then acceleration lags in state order.
+    assert_eq!(
+        model.states[12..],
+        ["u_vz_lagged", "vz_dot_lagged", "roll_rate_dot_lagged"]
+    );
+    let ir = ModelIr::new(&model);
+    let mut x12 = HOVER;
+    x12[9] = 0.5;
+    let x = state(x12, &[0.4, 0.3, -0.2]);
+    let u = [1.0, 0.0, 0.0, 0.0];
+    let f = ir.eval_f(&x, &u);
+    // v̇z = ℓ_vz, ℓ̇_vz = (2 s_vz − ℓ_vz)/τ: the base row sees the lagged input.
+    assert_eq!(f[8], 0.3);
+    assert!((f[13] - (2.0 * 0.4 - 0.3) / 0.05).abs() < 1e-12, "{}", f[13]);
+    // roll_rate' = ℓ, ℓ̇ = (−3 roll_rate − ℓ)/τ.
+    assert_eq!(f[9], -0.2);
+    assert!((f[14] - (-3.0 * 0.5 + 0.2) / 0.1).abs() < 1e-12, "{}", f[14]);
+    let (fx, _) = ir.eval_jacobian(&x, &u);
+    assert_eq!((fx[8][13], fx[9][14]), (1.0, 1.0));
+    assert!((fx[14][9] + 3.0 / 0.1).abs() < 1e-12 && (fx[14][14] + 1.0 / 0.1).abs() < 1e-12);
+}
+
+#[test]
 fn latency_is_not_part_of_f() {
     let corrected = with(toy(), json!({"latency": {"u_vz": 0.1, "u_yaw_rate": 0.05}}));
     assert_eq!(corrected.nx(), 12);
@@ -193,6 +221,7 @@ fn every_correction() -> Value {
         "thrust_decay": {"per_second": -0.0008},
         "ground_effect": {"gain": 1.0, "rotor_radius": 0.165},
         "actuator_lag": {"u_roll": 0.08, "u_pitch": 0.08},
+        "acceleration_lag": {"vz": 0.05, "yaw_rate": 0.1},
         "latency": {"u_vz": 0.1, "u_roll": 0.1, "u_pitch": 0.1, "u_yaw_rate": 0.1}
     })
 }
@@ -212,7 +241,13 @@ fn all_corrections_together_are_the_sum_of_the_equations() {
         let model = with(shipped(file), every_correction());
         assert_eq!(
             model.states[12..],
-            ["u_roll_lagged", "u_pitch_lagged", "flight_time"],
+            [
+                "u_roll_lagged",
+                "u_pitch_lagged",
+                "vz_dot_lagged",
+                "yaw_rate_dot_lagged",
+                "flight_time"
+            ],
             "{file}"
         );
         let (ir, base) = (ModelIr::new(&model), ModelIr::new(&base_model));
@@ -228,15 +263,16 @@ fn all_corrections_together_are_the_sum_of_the_equations() {
             // The base sees the lag states instead of u_roll, u_pitch.
             let ub = [u[0], x[12], x[13], u[3]];
             let fb = base.eval_f(&x[..12], &ub);
-            let (vel, z, tf) = ([x[6], x[7], x[8]], x[2], x[14]);
+            let (vel, z, tf) = ([x[6], x[7], x[8]], x[2], x[16]);
+            // The lagged rows: vz and yaw_rate are their lag states ℓ; thrust terms see ℓ_vz.
+            let a = [fb[6], fb[7], x[14]];
             let speed = (vel.iter().map(|a| a * a).sum::<f64>() + 0.01).sqrt();
             let rr = (0.165_f64 / 4.0).powi(2);
             for k in 0..3 {
                 let (lin, quad) = ([0.27, 0.27, 0.5][k], [0.02, 0.02, 0.04][k]);
-                let thrust = fb[6 + k] + if k == 2 { g } else { 0.0 };
-                let mut expected =
-                    fb[6 + k] - lin * vel[k] - quad * speed * vel[k] + [0.1, -0.05, 0.02][k] + 0.08 * thrust
-                        - 0.0008 * tf * thrust;
+                let thrust = a[k] + if k == 2 { g } else { 0.0 };
+                let mut expected = a[k] - lin * vel[k] - quad * speed * vel[k] + [0.1, -0.05, 0.02][k] + 0.08 * thrust
+                    - 0.0008 * tf * thrust;
                 if k == 2 {
                     expected += thrust * rr / (z * z + rr);
                 }
@@ -247,12 +283,16 @@ fn all_corrections_together_are_the_sum_of_the_equations() {
                     6 + k
                 );
             }
-            for i in (0..12).filter(|i| !(6..9).contains(i)) {
+            for i in (0..11).filter(|i| !(6..9).contains(i)) {
                 assert!((f[i] - fb[i]).abs() <= 1e-12 * fb[i].abs().max(1.0), "{file}: row {i}");
             }
+            assert_eq!(f[11], x[15], "{file}: the yaw_rate row is its lag state");
             assert!((f[12] - (u[1] - x[12]) / 0.08).abs() < 1e-9);
             assert!((f[13] - (u[2] - x[13]) / 0.08).abs() < 1e-9);
-            assert_eq!(f[14], 1.0);
+            // ℓ̇ = (b − ℓ)/τ with b the base row.
+            assert!((f[14] - (fb[8] - x[14]) / 0.05).abs() <= 1e-9 * fb[8].abs().max(1.0));
+            assert!((f[15] - (fb[11] - x[15]) / 0.1).abs() <= 1e-9 * fb[11].abs().max(1.0));
+            assert_eq!(f[16], 1.0);
         }
     }
 }
@@ -337,7 +377,7 @@ fn attach_inserts_the_block_and_keeps_the_file_readable() {
     assert!(out.starts_with(text.trim_end().trim_end_matches('}').trim_end()));
     let model = parse(&out, "corrected.json").unwrap();
     assert_eq!(model.corrections.as_ref(), Some(&corrections));
-    assert_eq!(model.nx(), 15);
+    assert_eq!(model.nx(), 17);
     // Attaching again replaces the block.
     let smaller = Corrections {
         thrust_gain: Some(0.1),
@@ -371,7 +411,8 @@ fn summary_lists_every_effect_and_the_extra_states() {
         "ground effect: gain 1, rotor radius 0.165 m",
         "actuator lag: u_roll 0.08 s, u_pitch 0.08 s",
         "u_vz 0.1 s, u_roll 0.1 s, u_pitch 0.1 s, u_yaw_rate 0.1 s",
-        "extra states: u_roll_lagged, u_pitch_lagged, flight_time",
+        "acceleration lag: vz 0.05 s, yaw_rate 0.1 s",
+        "extra states: u_roll_lagged, u_pitch_lagged, vz_dot_lagged, yaw_rate_dot_lagged, flight_time",
     ] {
         assert!(text.contains(part), "missing {part:?} in\n{text}");
     }
@@ -397,9 +438,14 @@ fn self_simulated_log(model: &Model, n: usize) -> FlightLog {
             0.1,
         ]
     };
-    // At rest at the first (delayed) command: lag states = u_0, flight time 0.
+    // At rest at the first (delayed) command: input lag states = u_0, acceleration lag states =
+    // their rows (v̇z = 2 u_vz, the toy's yaw_rate row is 0), flight time 0.
     let u0 = command(0);
-    let mut x: Vec<f64> = [0.0; 12].iter().copied().chain([u0[1], u0[2], 0.0]).collect();
+    let mut x: Vec<f64> = [0.0; 12]
+        .iter()
+        .copied()
+        .chain([u0[1], u0[2], 2.0 * u0[0], 0.0, 0.0])
+        .collect();
     x[2] = 1.0;
     let mut csv = format!("# rate_hz: 30\n{HEADER}\n");
     for k in 0..n {
@@ -455,13 +501,15 @@ fn check_prints_the_corrections() {
         .unwrap();
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(out.contains("model 'sindy_m100' (sindy), 15 states, 4 inputs"), "{out}");
+    assert!(out.contains("model 'sindy_m100' (sindy), 17 states, 4 inputs"), "{out}");
     assert!(
         out.contains("\n  corrections (source: test):\n    linear drag: xy 0.27 1/s, z 0.5 1/s\n"),
         "{out}"
     );
     assert!(
-        out.contains("    extra states: u_roll_lagged, u_pitch_lagged, flight_time\n"),
+        out.contains(
+            "    extra states: u_roll_lagged, u_pitch_lagged, vz_dot_lagged, yaw_rate_dot_lagged, flight_time\n"
+        ),
         "{out}"
     );
     assert!(out.contains("RK4 at 30 Hz"), "{out}");
@@ -472,8 +520,8 @@ fn mpc_weights_of_the_extra_states_default_to_zero() {
     use uavgen::mpc_options::{MpcOptions, MpcOptionsFile};
     let model = with(toy(), every_correction());
     let d = MpcOptions::defaults(&model);
-    assert_eq!(d.q.len(), 15);
-    assert_eq!(d.q[12..], [0.0; 3]);
+    assert_eq!(d.q.len(), 17);
+    assert_eq!(d.q[12..], [0.0; 5]);
     // An options file written for the 12 logged states: the extra states get 0.
     let file = MpcOptionsFile {
         q: Some(vec![1.0; 12]),
@@ -481,7 +529,7 @@ fn mpc_weights_of_the_extra_states_default_to_zero() {
     };
     let o = MpcOptions::from_file(&model, file, "o.json").unwrap();
     assert_eq!(o.q[..12], [1.0; 12]);
-    assert_eq!((o.q[12..].to_vec(), o.q_terminal.len()), (vec![0.0; 3], 15));
+    assert_eq!((o.q[12..].to_vec(), o.q_terminal.len()), (vec![0.0; 5], 17));
     let file = MpcOptionsFile {
         q: Some(vec![1.0; 13]),
         ..MpcOptionsFile::default()
@@ -489,6 +537,6 @@ fn mpc_weights_of_the_extra_states_default_to_zero() {
     let e = MpcOptions::from_file(&model, file, "o.json").unwrap_err();
     assert_eq!(
         e,
-        "o.json: q: expected 15 values (or 12: the extra states of the corrections then weigh 0), found 13"
+        "o.json: q: expected 17 values (or 12: the extra states of the corrections then weigh 0), found 13"
     );
 }

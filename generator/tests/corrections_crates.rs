@@ -178,13 +178,17 @@ fn corrected_pd_crate_matches_the_interpreter() {
         json!({
             "linear_drag": {"xy": 0.3, "z": 0.2},
             "quadratic_drag": {"xy": 0.01, "z": 0.0},
-            "actuator_lag": {"u_vz": 0.15, "u_roll": 0.08, "u_pitch": 0.08}
+            "actuator_lag": {"u_vz": 0.15, "u_roll": 0.08, "u_pitch": 0.08},
+            "acceleration_lag": {"roll_rate": 0.04, "pitch_rate": 0.04}
         }),
     );
     let tmp = tempfile::tempdir().unwrap();
     let checks = r#"
-    assert_eq!(NX, 15);
-    assert_eq!(STATE_NAMES[12..], ["u_vz_lagged", "u_roll_lagged", "u_pitch_lagged"]);
+    assert_eq!(NX, 17);
+    assert_eq!(
+        STATE_NAMES[12..],
+        ["u_vz_lagged", "u_roll_lagged", "u_pitch_lagged", "roll_rate_dot_lagged", "pitch_rate_dot_lagged"]
+    );
     assert_eq!(INPUT_DELAY, [0.0; NU]);
     assert_eq!(INPUT_DELAY_SAMPLES, [0; NU]);"#;
     generate_and_test(&model, "corrected_pd", tmp.path(), checks);

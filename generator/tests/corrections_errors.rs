@@ -67,6 +67,14 @@ fn each_bad_value_is_named() {
             json!({"actuator_lag": {"vx": 0.1}}),
             "bad.json: corrections.actuator_lag.vx: 'vx' is not an input (inputs: u_vz, u_roll, u_pitch, u_yaw_rate)",
         ),
+        (
+            json!({"acceleration_lag": {"roll": 0.1}}),
+            "bad.json: corrections.acceleration_lag.roll: 'roll' is not a velocity or rate state (one of: vx, vy, vz, roll_rate, pitch_rate, yaw_rate)",
+        ),
+        (
+            json!({"acceleration_lag": {"pitch_rate": 0.0}}),
+            "bad.json: corrections.acceleration_lag.pitch_rate: must be finite and > 0 (a time constant in s), found 0",
+        ),
     ];
     for base in [sindy(), pd()] {
         for (corrections, expected) in cases {
@@ -84,7 +92,7 @@ fn schema_errors_carry_the_path_under_corrections() {
         ),
         (
             json!({"wind": [1, 0, 0]}),
-            "bad.json: corrections.wind: unknown field `wind`, expected one of `source`, `linear_drag`, `quadratic_drag`, `force_bias`, `thrust_gain`, `thrust_decay`, `ground_effect`, `actuator_lag`, `latency`",
+            "bad.json: corrections.wind: unknown field `wind`, expected one of `source`, `linear_drag`, `quadratic_drag`, `force_bias`, `thrust_gain`, `thrust_decay`, `ground_effect`, `actuator_lag`, `acceleration_lag`, `latency`",
         ),
         (
             json!({"force_bias": [0.1, 0.2]}),

@@ -1,26 +1,36 @@
 //! The base model with named effects, stepped exactly (RK4 on an extended state) for the shrink
 //! figures: what the corrected model file describes.
 //!
-//! Extended state z = [x (12), s (4 lag states, used for lagged inputs), t (flight time)]:
+//! Extended state z = [x (12), s (4 lag states, used for lagged inputs), t (flight time), ℓ (6 lag
+//! states of the acceleration rows, used for lagged rows)]:
 //!
 //! ```text
 //! ũ_j   = s_j if input j is lagged, else v_j          (v: the delayed input, interval average)
-//! ẋ     = f(x, ũ) + [0 … 0, Σ Δv̇(x, f_v(x, ũ), t), 0 0 0]
+//! b     = f(x, ũ)                                     (the base model)
+//! ẋ_i   = ℓ_c if row i = 6 + c is lagged, else b_i; then + Σ Δv̇(x, a, t) on vx vy vz, with a the
+//!         (vx, vy, vz) rows after that replacement
 //! ṡ_j   = (v_j − s_j)/τ_j
+//! ℓ̇_c   = (b_{6+c} − ℓ_c)/τ_c
 //! ṫ     = 1
 //! ```
 //!
 //! A horizon run from the logged sample k starts at x_k, the lag states s_k that the log's inputs
-//! give ([`super::catalogue::inputs::lag_states`]) and the flight time t_k.
+//! give ([`super::catalogue::inputs::lag_states`]), the acceleration lag states ℓ_k that the
+//! base model's rows along the log give (the same filter, ℓ₀ = b₀) and the flight time t_k.
 
-use super::catalogue::inputs::{delayed, lag_states, InputTransform};
+use super::catalogue::inputs::{delayed, lag_states, row_lag, InputTransform};
 use super::catalogue::linear::{delta, Context, Sample};
 use super::catalogue::EffectKind;
 use super::data::SegData;
 use super::residuals::{rk4, Base};
 
 /// Dimension of the extended state.
-const NZ: usize = 17;
+const NZ: usize = 23;
+/// Offset of ℓ in the extended state.
+const L0: usize = 17;
+
+/// The lag states of a sample: s (inputs, 0..4) and ℓ (acceleration rows, 4..10).
+pub(crate) type Lags = [f64; 10];
 
 /// The base model and the named model effects with their parameters.
 pub(crate) struct Augmented<'a> {
@@ -33,7 +43,16 @@ pub(crate) struct Augmented<'a> {
 /// The inputs a segment's runs need: delayed inputs (interval averages) and lag states per row.
 pub(crate) struct SeenInputs {
     pub v: Vec<[f64; 4]>,
-    pub s: Vec<[f64; 4]>,
+    pub s: Vec<Lags>,
+}
+
+fn pack(x: &[f64; 12], s: &Lags, t: f64) -> [f64; NZ] {
+    let mut z = [0.0; NZ];
+    z[..12].copy_from_slice(x);
+    z[12..16].copy_from_slice(&s[..4]);
+    z[16] = t;
+    z[L0..].copy_from_slice(&s[4..]);
+    z
 }
 
 impl Augmented<'_> {
@@ -47,21 +66,32 @@ impl Augmented<'_> {
         }
     }
 
-    fn deriv(&self, z: &[f64; NZ], v: &[f64; 4]) -> [f64; NZ] {
-        let mut x = [0.0; 12];
-        x.copy_from_slice(&z[..12]);
+    /// The inputs the base model sees at z under the delayed input v.
+    fn effective(&self, z: &[f64; NZ], v: &[f64; 4]) -> [f64; 4] {
         let mut u = *v;
         for j in 0..4 {
             if self.transform.lag[j].is_some() {
                 u[j] = z[12 + j];
             }
         }
-        let f = self.base.f(&x, &u);
+        u
+    }
+
+    fn deriv(&self, z: &[f64; NZ], v: &[f64; 4]) -> [f64; NZ] {
+        let mut x = [0.0; 12];
+        x.copy_from_slice(&z[..12]);
+        let b = self.base.f(&x, &self.effective(z, v));
         let mut out = [0.0; NZ];
-        out[..12].copy_from_slice(&f);
+        out[..12].copy_from_slice(&b);
+        for c in 0..6 {
+            if let Some(tau) = self.transform.accel_lag[c] {
+                out[6 + c] = z[L0 + c];
+                out[L0 + c] = (b[6 + c] - z[L0 + c]) / tau;
+            }
+        }
         let sample = Sample {
             x: &x,
-            base_acc: [f[6], f[7], f[8]],
+            base_acc: [out[6], out[7], out[8]],
             flight_time: z[16],
         };
         for (kind, theta) in &self.linear {
@@ -80,24 +110,14 @@ impl Augmented<'_> {
     }
 
     /// ẋ of the 12 states at (x, s, t) under the delayed input v.
-    pub fn f(&self, x: &[f64; 12], s: &[f64; 4], t: f64, v: &[f64; 4]) -> [f64; 12] {
-        let mut z = [0.0; NZ];
-        z[..12].copy_from_slice(x);
-        z[12..16].copy_from_slice(s);
-        z[16] = t;
-        let d = self.deriv(&z, v);
+    pub fn f(&self, x: &[f64; 12], s: &Lags, t: f64, v: &[f64; 4]) -> [f64; 12] {
+        let d = self.deriv(&pack(x, s, t), v);
         std::array::from_fn(|i| d[i])
     }
 
     /// RK4 substeps: the base model's, more if a lag is stiffer (h/τ ≤ 2 on the lag states).
     pub fn substeps(&self, dt: f64, base_substeps: usize) -> usize {
-        let tau_min = self
-            .transform
-            .lag
-            .iter()
-            .flatten()
-            .cloned()
-            .fold(f64::INFINITY, f64::min);
+        let tau_min = self.transform.fastest_lag();
         let lag = if tau_min.is_finite() {
             (dt / (2.0 * tau_min)).ceil() as usize
         } else {
@@ -110,7 +130,7 @@ impl Augmented<'_> {
     pub fn seen_inputs(&self, seg: &SegData) -> SeenInputs {
         let n = seg.len();
         let mut v = seg.u.clone();
-        let mut s = seg.u.clone();
+        let mut s = vec![[0.0; 10]; n];
         for j in 0..4 {
             let col: Vec<f64> = seg.u.iter().map(|r| r[j]).collect();
             let d = delayed(&col, seg.dt, self.transform.delay[j]);
@@ -123,20 +143,36 @@ impl Augmented<'_> {
                 s[m][j] = st[m];
             }
         }
+        if self.transform.accel_lag.iter().any(Option::is_some) {
+            // The base rows at the start and the end of every sample under its input, then their
+            // lag (first-order hold between the two, as a flight computer would estimate it).
+            let b = |m: usize, at: usize| {
+                let z = pack(&seg.x[at], &s[at], seg.flight_time[at]);
+                self.base.f(&seg.x[at], &self.effective(&z, &v[m]))
+            };
+            let ends: Vec<([f64; 12], [f64; 12])> = (0..n).map(|m| (b(m, m), b(m, (m + 1).min(n - 1)))).collect();
+            for c in 0..6 {
+                if let Some(tau) = self.transform.accel_lag[c] {
+                    let b0: Vec<f64> = ends.iter().map(|e| e.0[6 + c]).collect();
+                    let b1: Vec<f64> = ends.iter().map(|e| e.1[6 + c]).collect();
+                    let (states, _) = row_lag(&b0, &b1, seg.dt, tau);
+                    for (sm, l) in s.iter_mut().zip(states) {
+                        sm[4 + c] = l;
+                    }
+                }
+            }
+        }
         SeenInputs { v, s }
     }
 
     /// One sample from (x, s, t) under the delayed input v.
-    pub fn step(&self, x: &[f64; 12], s: &[f64; 4], t: f64, v: &[f64; 4], dt: f64, m: usize) -> ([f64; 12], [f64; 4]) {
-        let mut z = [0.0; NZ];
-        z[..12].copy_from_slice(x);
-        z[12..16].copy_from_slice(s);
-        z[16] = t;
-        let z = rk4(|z| self.deriv(z, v), &z, dt, m);
+    pub fn step(&self, x: &[f64; 12], s: &Lags, t: f64, v: &[f64; 4], dt: f64, m: usize) -> ([f64; 12], Lags) {
+        let z = rk4(|z| self.deriv(z, v), &pack(x, s, t), dt, m);
         let mut xo = [0.0; 12];
         xo.copy_from_slice(&z[..12]);
-        let mut so = [0.0; 4];
-        so.copy_from_slice(&z[12..16]);
+        let mut so = [0.0; 10];
+        so[..4].copy_from_slice(&z[12..16]);
+        so[4..].copy_from_slice(&z[L0..]);
         (xo, so)
     }
 }
@@ -170,6 +206,8 @@ mod tests {
         let mut transform = InputTransform::default();
         transform.lag[1] = Some(0.1);
         transform.lag[3] = Some(0.2);
+        transform.accel_lag[2] = Some(0.05);
+        transform.accel_lag[3] = Some(0.03);
         let aug = Augmented {
             base: &base,
             ctx,
@@ -190,9 +228,12 @@ mod tests {
         };
         c.actuator_lag.insert("u_roll".into(), 0.1);
         c.actuator_lag.insert("u_yaw_rate".into(), 0.2);
+        c.acceleration_lag.insert("vz".into(), 0.05);
+        c.acceleration_lag.insert("roll_rate".into(), 0.03);
         let corrected = parse(&attach_corrections(&text, "c.json", &c).unwrap(), "c.json").unwrap();
-        // States: 12, u_roll_lagged, u_yaw_rate_lagged, flight_time.
-        assert_eq!(corrected.nx(), 15);
+        // States: 12, u_roll_lagged, u_yaw_rate_lagged, vz_dot_lagged, roll_rate_dot_lagged,
+        // flight_time.
+        assert_eq!(corrected.nx(), 17);
         let ir = ModelIr::new(&corrected);
         let mut seed = 7u64;
         let mut rnd = || {
@@ -203,15 +244,13 @@ mod tests {
         };
         for _ in 0..50 {
             let x: [f64; 12] = std::array::from_fn(|i| if i == 2 { 0.3 + rnd() } else { rnd() });
-            let s = [0.0, rnd(), 0.0, rnd()];
+            let (l_vz, l_roll) = (5.0 * rnd(), 20.0 * rnd());
+            let s = [0.0, rnd(), 0.0, rnd(), 0.0, 0.0, l_vz, l_roll, 0.0, 0.0];
             let t = 100.0 * (rnd() + 0.5);
             let v: [f64; 4] = std::array::from_fn(|_| rnd());
-            let mut z = [0.0; NZ];
-            z[..12].copy_from_slice(&x);
-            z[12..16].copy_from_slice(&s);
-            z[16] = t;
+            let z = pack(&x, &s, t);
             let mine = aug.deriv(&z, &v);
-            let xs: Vec<f64> = x.iter().copied().chain([s[1], s[3], t]).collect();
+            let xs: Vec<f64> = x.iter().copied().chain([s[1], s[3], l_vz, l_roll, t]).collect();
             let theirs = ir.eval_f(&xs, &v);
             for i in 0..12 {
                 assert!(
@@ -222,7 +261,9 @@ mod tests {
                 );
             }
             assert!((mine[13] - theirs[12]).abs() < 1e-12 && (mine[15] - theirs[13]).abs() < 1e-12);
-            assert_eq!(theirs[14], 1.0);
+            assert!((mine[L0 + 2] - theirs[14]).abs() < 1e-9 * theirs[14].abs().max(1.0));
+            assert!((mine[L0 + 3] - theirs[15]).abs() < 1e-9 * theirs[15].abs().max(1.0));
+            assert_eq!(theirs[16], 1.0);
         }
     }
 }

@@ -13,7 +13,7 @@
 //! - **Stale samples**: the residual of the data with stale rows interpolated; z the
 //!   likelihood-ratio z on the training data.
 
-use super::catalogue::inputs::{delay_grid, InputTransform};
+use super::catalogue::inputs::{delay_grid, InputTransform, LAG_CHANNELS};
 use super::catalogue::linear::columns;
 use super::catalogue::{EffectKind, Family};
 use super::design::{design, design_from, seen_f};
@@ -304,7 +304,7 @@ fn with_channel(tr: &InputTransform, kind: EffectKind, j: usize, v: f64) -> Inpu
     let mut t = *tr;
     match kind {
         EffectKind::Latency => t.delay[j] = v,
-        _ => t.lag[j] = (v > 0.0).then_some(v),
+        _ => t.set_lag(j, (v > 0.0).then_some(v)),
     }
     t
 }
@@ -364,9 +364,17 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
         chosen: Vec<f64>,
     }
     let mut scans: Vec<ChannelScan> = Vec::new();
-    for j in 0..4 {
-        let mut aff: Vec<usize> = (0..6).filter(|&c| p.input_rows[j][c]).collect();
-        if thrust_named && aff.iter().any(|&c| c < 3) {
+    let channels = match kind {
+        EffectKind::Latency => 4,
+        _ => LAG_CHANNELS,
+    };
+    for j in 0..channels {
+        let mut aff: Vec<usize> = if j < 4 {
+            (0..6).filter(|&c| p.input_rows[j][c]).collect()
+        } else {
+            vec![j - 4]
+        };
+        if j < 4 && thrust_named && aff.iter().any(|&c| c < 3) {
             aff = [0, 1, 2]
                 .into_iter()
                 .chain(aff.into_iter().filter(|&c| c >= 3))
@@ -447,7 +455,22 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
             chosen,
         });
     }
-    let mut used: Vec<usize> = (0..scans.len()).filter(|&q| scans[q].param.kept).collect();
+    // Kept channels, strongest first; a lag channel is left out where a stronger one already acts
+    // on its rows (an input lag and the lag of a row it drives are alternatives, not a pair).
+    let mut kept: Vec<usize> = (0..scans.len()).filter(|&q| scans[q].param.kept).collect();
+    kept.sort_by(|&a, &b| scans[b].param.z.total_cmp(&scans[a].param.z));
+    let mut used: Vec<usize> = Vec::new();
+    for q in kept {
+        let overlaps = used
+            .iter()
+            .any(|&u| scans[u].aff.iter().any(|c| scans[q].aff.contains(c)));
+        if kind == EffectKind::Latency || !overlaps {
+            used.push(q);
+        } else {
+            scans[q].param.kept = false;
+        }
+    }
+    used.sort_unstable();
     if used.is_empty() {
         if let Some(q) = (0..scans.len()).max_by(|&a, &b| scans[a].param.z.total_cmp(&scans[b].param.z)) {
             used.push(q);

@@ -7,7 +7,7 @@
 //! (it is about the data); `latency` is written as the input delays the runtime compensates.
 
 use super::catalogue::linear::columns;
-use super::catalogue::EffectKind;
+use super::catalogue::{EffectKind, CHANNELS};
 use super::select::State;
 use crate::model::{Corrections, Drag, GroundEffect, ThrustDecay};
 
@@ -89,6 +89,11 @@ pub(crate) fn corrections(
         }
         if let Some(tau) = state.transform.lag[j] {
             c.actuator_lag.insert(inputs[j].clone(), tau);
+        }
+    }
+    for (k, tau) in state.transform.accel_lag.iter().enumerate() {
+        if let Some(tau) = tau {
+            c.acceleration_lag.insert(CHANNELS[k].to_string(), *tau);
         }
     }
     c

@@ -69,13 +69,23 @@ pub(crate) fn vertical_only(kind: EffectKind) -> bool {
     matches!(kind, EffectKind::ThrustGain | EffectKind::ThrustDecay)
 }
 
-/// f(x_m, ū_m) at every row: the base model with the inputs it sees.
+/// f(x_m, ū_m) at every row: the base model with the inputs it sees, its lagged acceleration rows
+/// replaced by their lags' interval averages.
 pub(crate) fn seen_f(seg: &SegData, base: &Base, transform: &InputTransform) -> Vec<[f64; 12]> {
     if transform.is_identity() {
         return seg.f.clone();
     }
     let u = transform.apply(&seg.u, seg.dt);
-    seg.x.iter().zip(&u).map(|(x, u)| base.f(x, u)).collect()
+    let mut f: Vec<[f64; 12]> = seg.x.iter().zip(&u).map(|(x, u)| base.f(x, u)).collect();
+    if transform.accel_lag.iter().any(Option::is_some) {
+        // The rows at the end of each sample under its input.
+        let n = f.len();
+        let ends: Vec<[f64; 12]> = (0..n)
+            .map(|m| if m + 1 < n { base.f(&seg.x[m + 1], &u[m]) } else { f[m] })
+            .collect();
+        transform.lag_rows(&mut f, &ends, seg.dt);
+    }
+    f
 }
 
 /// The design of `seg` under `transform` with the columns of `kinds`.

@@ -184,6 +184,10 @@ pub struct Diagnosis {
     /// The named effects in order, or `["none"]`.
     pub verdict: Vec<String>,
     pub shrink: Shrink,
+    /// The gap before and after on noise-free copies of the held-out logs
+    /// ([`diagnose_with_reference`]; absent otherwise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference: Option<ReferenceShrink>,
     #[serde(rename = "where")]
     pub where_report: Option<WhereReport>,
     /// The greedy selection round by round.
@@ -198,6 +202,15 @@ pub struct Diagnosis {
     pub options: DiagnoseOptions,
     #[serde(skip)]
     where_input: Option<WhereInput>,
+}
+
+/// The model gap on noise-free logs of the held-out flights: the base model and the model with
+/// the named effects, one step and over the horizon (the figures of [`Shrink`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct ReferenceShrink {
+    pub data: String,
+    pub before: Side,
+    pub after: Side,
 }
 
 /// The model text with `corrections` attached, as a JSON value.
@@ -303,6 +316,66 @@ pub fn diagnose_with_progress(
     model: &Model,
     train: &[FlightLog],
     holdout: &[FlightLog],
+    options: &DiagnoseOptions,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Diagnosis, DiagnoseError> {
+    run(model, train, holdout, &[], options, progress)
+}
+
+/// [`diagnose`], and the gap before and after the named effects measured once more on
+/// `reference`: the held-out flights logged without sensor noise, row for row (simulation only,
+/// [`crate::sim::SimulatedLog::noise_free`]). Selection and fits never see `reference`; it only
+/// measures what the corrected model gains against the plant itself ([`Diagnosis::reference`]).
+pub fn diagnose_with_reference(
+    model: &Model,
+    train: &[FlightLog],
+    holdout: &[FlightLog],
+    reference: &[FlightLog],
+    options: &DiagnoseOptions,
+) -> Result<Diagnosis, DiagnoseError> {
+    if holdout.is_empty() || reference.len() != holdout.len() {
+        return Err(DiagnoseError::Options(format!(
+            "{} reference logs for {} held-out logs: give one noise-free copy per held-out log",
+            reference.len(),
+            holdout.len()
+        )));
+    }
+    for (r, h) in reference.iter().zip(holdout) {
+        let shape = |l: &FlightLog| l.segments.iter().map(|s| s.len()).collect::<Vec<_>>();
+        if shape(r) != shape(h) {
+            return Err(DiagnoseError::Data {
+                file: r.source.clone(),
+                message: format!("its segments do not match the held-out log {} row for row", h.source),
+            });
+        }
+    }
+    run(model, train, holdout, reference, options, &mut |_| {})
+}
+
+/// The base model's one-step and horizon figures on `logs` alone (no selection): in the
+/// self-check, its error on the held-out flight flown without the effect, which the effect's
+/// correction cannot be expected to remove.
+pub fn base_side(model: &Model, logs: &[FlightLog], options: &DiagnoseOptions) -> Result<Side, DiagnoseError> {
+    check(model, logs, options)?;
+    let base = residuals::Base::new(model, options.substeps, options.gravity);
+    let ctx = Context {
+        gravity: base.gravity,
+        rotor_radius: options.rotor_radius,
+    };
+    let data = data::prepare(&base, &options.savgol, options.residual, &[], logs, 1)?;
+    let plain = Augmented::plain(&base, ctx);
+    let mut pool = shrink::Pool::default();
+    for seg in &data.raw {
+        pool.add(&plain, seg, options.horizon);
+    }
+    Ok(pool.side())
+}
+
+fn run(
+    model: &Model,
+    train: &[FlightLog],
+    holdout: &[FlightLog],
+    reference: &[FlightLog],
     options: &DiagnoseOptions,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<Diagnosis, DiagnoseError> {
@@ -416,6 +489,36 @@ pub fn diagnose_with_progress(
             after.add(&aug, &data.variant(state.destale)[s], options.horizon);
         }
     }
+    // The same on the noise-free copies of the held-out logs (same stretches, same parameters).
+    let reference = if reference.is_empty() {
+        None
+    } else {
+        let refdata = data::prepare(&base, &options.savgol, options.residual, &[], reference, 1)?;
+        let key = |s: &data::SegData| (s.log, s.segment, s.part);
+        let (mut before, mut after) = (shrink::Pool::default(), shrink::Pool::default());
+        for i in problem.test_fits() {
+            let (lin, _) = corrected::linear_parameters(&state, &state.theta[i]);
+            let aug = Augmented {
+                base: &base,
+                ctx,
+                linear: lin,
+                transform: state.transform,
+            };
+            for &s in &problem.fits[i].test {
+                let k = key(&data.raw[s]);
+                let Some(r) = refdata.raw.iter().position(|d| key(d) == k) else {
+                    continue;
+                };
+                before.add(&plain, &refdata.raw[r], options.horizon);
+                after.add(&aug, &refdata.variant(state.destale)[r], options.horizon);
+            }
+        }
+        Some(ReferenceShrink {
+            data: "the held-out flights logged without sensor noise".to_string(),
+            before: before.side(),
+            after: after.side(),
+        })
+    };
     let verdict: Vec<String> = if state.named.is_empty() {
         vec!["none".to_string()]
     } else {
@@ -470,10 +573,12 @@ pub fn diagnose_with_progress(
             if let Some((_, v)) = linear.iter().find(|(k, _)| *k == named) {
                 e.parameters = report_json::linear_value(named, v, Some(options.rotor_radius));
             }
-            let inputs: Vec<(usize, f64)> = (0..4)
+            let inputs: Vec<(usize, f64)> = (0..catalogue::inputs::LAG_CHANNELS)
                 .filter_map(|j| match named {
-                    EffectKind::Latency => (state.transform.delay[j] > 0.0).then_some((j, state.transform.delay[j])),
-                    EffectKind::ActuatorLag => state.transform.lag[j].map(|t| (j, t)),
+                    EffectKind::Latency if j < 4 => {
+                        (state.transform.delay[j] > 0.0).then_some((j, state.transform.delay[j]))
+                    }
+                    EffectKind::ActuatorLag => state.transform.lag_of(j).map(|t| (j, t)),
                     _ => None,
                 })
                 .collect();
@@ -599,6 +704,7 @@ pub fn diagnose_with_progress(
         effects,
         verdict,
         shrink,
+        reference,
         where_report,
         rounds: rounds_report,
         corrections,

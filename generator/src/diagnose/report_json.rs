@@ -1,9 +1,9 @@
 //! The JSON shapes of report.json (every field is documented in docs/diagnose.md).
 
 use super::candidate::{Candidate, Params};
+use super::catalogue::inputs::lag_channel_name;
 use super::catalogue::linear::parameter_names;
 use super::catalogue::{EffectKind, CHANNELS};
-use crate::logs::INPUT_COLUMNS;
 use serde::Serialize;
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
@@ -85,14 +85,10 @@ pub(crate) fn linear_value(kind: EffectKind, values: &[f64], radius: Option<f64>
     }
 }
 
-/// The delays or lags of `inputs` (index, value) as an object keyed by input name.
+/// The delays or lags of `inputs` (lag channel index, value) as an object keyed by input name
+/// (`<state>_dot` for the lag of an acceleration row).
 pub(crate) fn input_value(inputs: &[(usize, f64)]) -> Value {
-    Value::Object(
-        inputs
-            .iter()
-            .map(|(j, v)| (INPUT_COLUMNS[*j].to_string(), json!(v)))
-            .collect(),
-    )
+    Value::Object(inputs.iter().map(|(j, v)| (lag_channel_name(*j), json!(v))).collect())
 }
 
 /// `parameters` and `uncertainty` of a candidate.
@@ -114,12 +110,8 @@ fn parameters(c: &Candidate, rotor_radius: f64) -> (Value, Value) {
             } else {
                 kept
             };
-            let p = shown
-                .iter()
-                .map(|s| (INPUT_COLUMNS[s.input].to_string(), json!(s.value)));
-            let u = shown
-                .iter()
-                .map(|s| (INPUT_COLUMNS[s.input].to_string(), json!(s.sigma)));
+            let p = shown.iter().map(|s| (lag_channel_name(s.input), json!(s.value)));
+            let u = shown.iter().map(|s| (lag_channel_name(s.input), json!(s.sigma)));
             (Value::Object(p.collect()), Value::Object(u.collect()))
         }
         Params::Stale {
@@ -171,7 +163,7 @@ pub fn effect_report(c: &Candidate, round: usize, selected: bool, rotor_radius: 
             Params::Input(scan) => Some(
                 scan.iter()
                     .map(|s| InputScan {
-                        input: INPUT_COLUMNS[s.input].to_string(),
+                        input: lag_channel_name(s.input),
                         value: s.value,
                         sigma: s.sigma,
                         z: s.z,

@@ -12,7 +12,7 @@
 //! effects already named, and all reported parameters, come from the fit on all training data.
 
 use super::candidate::{evaluate, Candidate, Install};
-use super::catalogue::inputs::InputTransform;
+use super::catalogue::inputs::{InputTransform, LAG_CHANNELS};
 use super::catalogue::linear::{linear_kinds, Context};
 use super::catalogue::EffectKind;
 use super::data::Prepared;
@@ -221,7 +221,9 @@ fn named_inputs(state: &State) -> Vec<(EffectKind, usize)> {
         if state.named.contains(&EffectKind::Latency) && state.transform.delay[j] > 0.0 {
             out.push((EffectKind::Latency, j));
         }
-        if state.transform.lag[j].is_some() {
+    }
+    for j in 0..LAG_CHANNELS {
+        if state.transform.lag_of(j).is_some() {
             out.push((EffectKind::ActuatorLag, j));
         }
     }
@@ -248,7 +250,7 @@ fn backfit(p: &Problem, state: &mut State) {
         for &(kind, j) in &inputs {
             let current = match kind {
                 EffectKind::Latency => state.transform.delay[j],
-                _ => state.transform.lag[j].unwrap_or(0.0),
+                _ => state.transform.lag_of(j).unwrap_or(0.0),
             };
             let grid: Vec<f64> = match kind {
                 EffectKind::Latency => (-8..=8)
@@ -262,7 +264,7 @@ fn backfit(p: &Problem, state: &mut State) {
                 let mut tr = state.transform;
                 match kind {
                     EffectKind::Latency => tr.delay[j] = g,
-                    _ => tr.lag[j] = Some(g),
+                    _ => tr.set_lag(j, Some(g)),
                 }
                 let designs: Vec<Design> = segs
                     .iter()
@@ -293,7 +295,7 @@ fn backfit(p: &Problem, state: &mut State) {
             }
             match kind {
                 EffectKind::Latency => state.transform.delay[j] = best.1,
-                _ => state.transform.lag[j] = Some(best.1),
+                _ => state.transform.set_lag(j, Some(best.1)),
             }
         }
         refit(p, state);
@@ -311,7 +313,7 @@ fn install(p: &Problem, state: &mut State, c: &Candidate) {
             for &(j, v) in values {
                 match c.kind {
                     EffectKind::Latency => state.transform.delay[j] = v,
-                    _ => state.transform.lag[j] = Some(v),
+                    _ => state.transform.set_lag(j, Some(v)),
                 }
             }
             refit(p, state);

@@ -1,6 +1,6 @@
 //! The operating envelope over which the substep count is chosen.
 
-use crate::model::corrections::{FLIGHT_TIME, LAGGED_SUFFIX};
+use crate::model::corrections::{DOT_LAGGED_SUFFIX, FLIGHT_TIME, LAGGED_SUFFIX};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
@@ -8,13 +8,17 @@ use std::f64::consts::PI;
 /// Bounds per state and input, looked up by the standard names of
 /// `LOG_FORMAT.md`; other names get ±`default_bound`. The extra states of a
 /// model's `corrections` have their own: `flight_time` ranges over
-/// 0..`flight_time` s, and `<input>_lagged` over the bounds of `<input>`.
+/// 0..`flight_time` s, `<input>_lagged` over the bounds of `<input>`, and `<state>_dot_lagged`
+/// over ±`acceleration` (vx, vy, vz) or ±`angular_acceleration` (the rates).
 #[derive(Clone, Debug)]
 pub struct Envelope {
     pub position: f64,
     pub tilt: f64,
     pub speed: f64,
     pub angular_rate: f64,
+    /// |v̇| (m/s²) and |ω̇| (rad/s²) bounds of the acceleration lag states.
+    pub acceleration: f64,
+    pub angular_acceleration: f64,
     /// |u| bounds: u_vz, u_roll, u_pitch, u_yaw_rate (the MPC's default bounds).
     pub inputs: [f64; 4],
     pub default_bound: f64,
@@ -31,6 +35,8 @@ impl Default for Envelope {
             tilt: 0.6,
             speed: 5.0,
             angular_rate: 3.0,
+            acceleration: 10.0,
+            angular_acceleration: 40.0,
             inputs: [5.0, 0.611, 0.611, 5.0 * PI / 6.0],
             default_bound: 1.0,
             flight_time: 600.0,
@@ -46,9 +52,16 @@ impl Envelope {
         if name == FLIGHT_TIME {
             return (0.0, self.flight_time);
         }
-        let b = match name.strip_suffix(LAGGED_SUFFIX) {
-            Some(input) => self.bound(input),
-            None => self.bound(name),
+        let b = if let Some(state) = name.strip_suffix(DOT_LAGGED_SUFFIX) {
+            match state {
+                "vx" | "vy" | "vz" => self.acceleration,
+                _ => self.angular_acceleration,
+            }
+        } else {
+            match name.strip_suffix(LAGGED_SUFFIX) {
+                Some(input) => self.bound(input),
+                None => self.bound(name),
+            }
         };
         (-b, b)
     }

@@ -411,6 +411,7 @@ impl Stepper {
 /// dataset's filtered series itself.
 fn derivative_inputs(
     model: &Model,
+    ir: &ModelIr,
     log: &FlightLog,
     seg: &crate::identify::dataset::SegmentData,
     options: &EvaluateOptions,
@@ -420,12 +421,15 @@ fn derivative_inputs(
         if let Some(raw) = raw {
             let dt = segment_dt(raw).unwrap_or(seg.dt);
             if let Some(offset) = raw.t.iter().position(|&t| Some(&t) == seg.t.first()) {
-                return (ModelInputs::new(model, &raw.t, &raw.u, raw.t[0], dt), offset);
+                return (
+                    ModelInputs::new(model, ir, &raw.t, &raw.x, &raw.u, raw.t[0], dt),
+                    offset,
+                );
             }
         }
     }
     let t_start = raw.map_or(seg.t[0], |r| r.t[0]);
-    (ModelInputs::new(model, &seg.t, &seg.u, t_start, seg.dt), 0)
+    (ModelInputs::new(model, ir, &seg.t, &seg.x, &seg.u, t_start, seg.dt), 0)
 }
 
 /// The segment's median sample period, or `None` for a single sample.
@@ -496,7 +500,7 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
         let mut acc = Acc::new(h);
         // 1a. One-step derivative on the dataset's (possibly filtered, trimmed) samples.
         for seg in dataset.iter().flat_map(|d| &d.segments).filter(|s| s.log == li) {
-            let (inputs, offset) = derivative_inputs(model, log, seg, options);
+            let (inputs, offset) = derivative_inputs(model, &st.ir, log, seg, options);
             for (j, (x, dx)) in seg.x.iter().zip(&seg.dx).enumerate() {
                 acc.derivative_made += 1;
                 let f = st.ir.eval_f(&inputs.state(x, offset + j), &inputs.u[offset + j]);
@@ -512,7 +516,7 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
                 continue;
             };
             let m = st.substeps(dt, &log.source, si)?;
-            let inputs = ModelInputs::new(model, &seg.t, &seg.u, seg.t[0], dt);
+            let inputs = ModelInputs::new(model, &st.ir, &seg.t, &seg.x, &seg.u, seg.t[0], dt);
             // 1b. One-step next sample.
             for k in 0..n - 1 {
                 acc.next_made += 1;
@@ -614,7 +618,7 @@ pub fn traces(model: &Model, log: &FlightLog, options: &EvaluateOptions) -> Resu
             continue;
         };
         let m = st.substeps(dt, &log.source, si)?;
-        let inputs = ModelInputs::new(model, &seg.t, &seg.u, seg.t[0], dt);
+        let inputs = ModelInputs::new(model, &st.ir, &seg.t, &seg.x, &seg.u, seg.t[0], dt);
         let (free_run, diverged_at) = free_run(&st, seg, &inputs, dt, m);
         let horizon_runs = (0..seg.len() - 1)
             .step_by(h)

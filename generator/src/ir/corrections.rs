@@ -1,23 +1,25 @@
 //! The `corrections` block in the symbolic graph (docs/model-format.md#corrections).
 //!
 //! Graph variables of a corrected model: the 12 standard states, the extra states
-//! (`<input>_lagged` in input order, then `flight_time`), then the inputs. The base model is
-//! built on the 12 states and the *effective* inputs (the lag state s for a lagged input, the
-//! input itself otherwise); its rows are `base`. With v = [vx vy vz], a = the base's
-//! (vx, vy, vz) rows and T = a + g e_z (the thrust acceleration):
+//! (`<input>_lagged` in input order, `<state>_dot_lagged` in state order, then `flight_time`),
+//! then the inputs. The base model is built on the 12 states and the *effective* inputs (the lag
+//! state s for a lagged input, the input itself otherwise); its rows are `base`. A row with an
+//! acceleration lag is replaced by its lag state ℓ. With v = [vx vy vz], a = the (vx, vy, vz)
+//! rows after that replacement and T = a + g e_z (the thrust acceleration):
 //!
 //! ```text
 //! v̇ = a − D₁ v − D₂ √(‖v‖² + ε²) v + b + κ T + c t_f T + e_z gain T_z ρ²
 //!     D₁, D₂ = diag(xy, xy, z) of the linear and quadratic drag, ε = 0.1 m/s,
 //!     ρ² = r² / (z² + r²) with r = R/4, t_f = flight_time
 //! ṡ = (u − s) / τ        for each lagged input
+//! ℓ̇ = (base − ℓ) / τ     for each lagged acceleration (its row of the base model)
 //! ṫ_f = 1
 //! ```
 //!
 //! Every correction is evaluated with the base model's `a` at the same state and input, then
 //! they are summed. Latency is not part of f.
 
-use crate::model::corrections::{QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
+use crate::model::corrections::{LAGGABLE_STATES, QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
 use crate::model::{Corrections, Dynamics, Model};
 use crate::symbolic::{Graph, Id};
 
@@ -55,6 +57,19 @@ pub fn effective_inputs(model: &Model, vars: &[Id]) -> Vec<Id> {
 /// ẋ of the corrected model from the base model's rows `base` (one per base state).
 pub fn apply(g: &mut Graph, model: &Model, c: &Corrections, vars: &[Id], base: Vec<Id>) -> Vec<Id> {
     let (nxb, nx) = (model.base_nx(), model.nx());
+    // The acceleration lag states ℓ (after the input lag states) replace their base rows.
+    let input_lags = model.inputs.iter().filter(|u| c.lag(u).is_some()).count();
+    let mut dot_lags: Vec<(usize, Id, f64)> = Vec::new();
+    for (k, name) in LAGGABLE_STATES.iter().enumerate() {
+        if let Some(tau) = c.acceleration_lag(name) {
+            dot_lags.push((VX + k, vars[nxb + input_lags + dot_lags.len()], tau));
+        }
+    }
+    let targets = base.clone();
+    let mut base = base;
+    for &(row, l, _) in &dot_lags {
+        base[row] = l;
+    }
     let v = [vars[VX], vars[VX + 1], vars[VX + 2]];
     let a = [base[VX], base[VX + 1], base[VX + 2]];
     let grav = g.constant(gravity(model));
@@ -129,9 +144,45 @@ pub fn apply(g: &mut Graph, model: &Model, c: &Corrections, vars: &[Id], base: V
             lag_state += 1;
         }
     }
+    // ℓ̇ = (base − ℓ) / τ, in the order of the extra states.
+    for &(row, l, tau) in &dot_lags {
+        let d = g.sub(targets[row], l);
+        let inv_tau = g.constant(1.0 / tau);
+        f.push(g.mul(inv_tau, d));
+    }
     if c.thrust_decay.is_some() {
         f.push(g.one());
     }
     debug_assert_eq!(f.len(), nx, "one row per state");
     f
+}
+
+/// The acceleration lag states of `model`: (index in the full state, τ), in state order.
+pub fn dot_lag_states(model: &Model) -> Vec<(usize, f64)> {
+    let Some(c) = &model.corrections else {
+        return Vec::new();
+    };
+    let start = model.base_nx() + model.inputs.iter().filter(|u| c.lag(u).is_some()).count();
+    LAGGABLE_STATES
+        .iter()
+        .filter_map(|name| c.acceleration_lag(name))
+        .enumerate()
+        .map(|(i, tau)| (start + i, tau))
+        .collect()
+}
+
+/// The rows b the acceleration lag states of `lags` follow, read off `f` = ẋ of the corrected
+/// model at the full state z: b = ℓ + τ ℓ̇ (b does not depend on ℓ).
+pub fn dot_lag_targets(lags: &[(usize, f64)], z: &[f64], f: &[f64]) -> Vec<f64> {
+    lags.iter().map(|&(i, tau)| z[i] + tau * f[i]).collect()
+}
+
+/// A first-order lag ℓ̇ = (b − ℓ)/τ over h seconds while b goes linearly from b₀ to b₁ (exact for
+/// that first-order hold): ℓ⁺ = b₁ − rτ + (ℓ − b₀ + rτ) e^{−h/τ}, r = (b₁ − b₀)/h. How a flight
+/// computer (and `track`, `evaluate`, `diagnose`) estimates an acceleration lag state from the
+/// measured states and the inputs sent: b₀, b₁ the base model's row at the start and the end of
+/// the sample, with the input held over it.
+pub fn lag_foh(ell: f64, b0: f64, b1: f64, h: f64, tau: f64) -> f64 {
+    let rt = (b1 - b0) / h * tau;
+    b1 - rt + (ell - b0 + rt) * (-h / tau).exp()
 }

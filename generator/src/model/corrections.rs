@@ -16,8 +16,12 @@
 //! ```
 //!
 //! `actuator_lag` adds a state `<input>_lagged` per listed input, d/dt = (u − s)/τ, which the
-//! base model and the other corrections see instead of the input; `latency` is a pure input delay
-//! that is not part of f (the generated crate exports it, the runtime compensates it).
+//! base model and the other corrections see instead of the input; `acceleration_lag` adds a state
+//! `<state>_dot_lagged` per listed velocity or rate state, d/dt = (ẋ_base − ℓ)/τ, which replaces the
+//! base model's row of that state (motor lag: the forces and torques follow the base model's with
+//! a delay, state feedback of the autopilot included; thrust corrections see the lagged thrust);
+//! `latency` is a pure input delay that is not part of f (the generated crate exports it, the
+//! runtime compensates it).
 
 use super::error::{ModelError, ModelErrorKind as K};
 use super::file::DEFAULT_STATES;
@@ -32,6 +36,10 @@ pub const STANDARD_GRAVITY: f64 = 9.81;
 pub const FLIGHT_TIME: &str = "flight_time";
 /// The extra state of an actuator lag on input `u` is named `u` + this suffix.
 pub const LAGGED_SUFFIX: &str = "_lagged";
+/// The extra state of an acceleration lag on state `x` is named `x` + this suffix.
+pub const DOT_LAGGED_SUFFIX: &str = "_dot_lagged";
+/// The states an acceleration lag may act on (the rows of the base model that are accelerations).
+pub const LAGGABLE_STATES: [&str; 6] = ["vx", "vy", "vz", "roll_rate", "pitch_rate", "yaw_rate"];
 
 /// The `corrections` block as written. Every field is optional; unknown fields are rejected.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -61,6 +69,10 @@ pub struct Corrections {
     /// Input name → first-order lag time constant τ in s.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub actuator_lag: BTreeMap<String, f64>,
+    /// Velocity or rate state name (vx … yaw_rate) → first-order lag time constant τ in s of the
+    /// base model's row of that state.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub acceleration_lag: BTreeMap<String, f64>,
     /// Input name → pure delay in s.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub latency: BTreeMap<String, f64>,
@@ -101,19 +113,30 @@ impl Corrections {
         self.actuator_lag.get(input).copied()
     }
 
+    /// τ of the acceleration lag on `state`, if it has one.
+    pub fn acceleration_lag(&self, state: &str) -> Option<f64> {
+        self.acceleration_lag.get(state).copied()
+    }
+
     /// The pure delay of `input` in s (0 when it has none).
     pub fn delay(&self, input: &str) -> f64 {
         self.latency.get(input).copied().unwrap_or(0.0)
     }
 
     /// The states the block adds, in state order: `<input>_lagged` for each lagged input (in
-    /// input order), then `flight_time` if there is a thrust decay.
+    /// input order), `<state>_dot_lagged` for each acceleration lag (in state order), then
+    /// `flight_time` if there is a thrust decay.
     pub fn extra_states(&self, inputs: &[String]) -> Vec<String> {
         let lagged = inputs
             .iter()
             .filter(|u| self.actuator_lag.contains_key(*u))
             .map(|u| format!("{u}{LAGGED_SUFFIX}"));
+        let dot_lagged = LAGGABLE_STATES
+            .iter()
+            .filter(|x| self.acceleration_lag.contains_key(**x))
+            .map(|x| format!("{x}{DOT_LAGGED_SUFFIX}"));
         lagged
+            .chain(dot_lagged)
             .chain(self.thrust_decay.map(|_| FLIGHT_TIME.to_string()))
             .collect()
     }
@@ -213,13 +236,36 @@ impl Corrections {
                 }
             }
         }
+        for (name, &v) in &self.acceleration_lag {
+            let loc = format!(".acceleration_lag.{name}");
+            if !LAGGABLE_STATES.contains(&name.as_str()) {
+                return Err(ModelError::new(
+                    label,
+                    format!("corrections{loc}"),
+                    K::UnknownVariable,
+                    format!(
+                        "'{name}' is not a velocity or rate state (one of: {})",
+                        LAGGABLE_STATES.join(", ")
+                    ),
+                ));
+            }
+            if !(v.is_finite() && v > 0.0) {
+                return bad(
+                    &loc,
+                    format!("must be finite and > 0 (a time constant in s), found {v}"),
+                );
+            }
+        }
         // The extra states must not take a name the model already uses (states are the standard
         // ones, so only an input can clash).
         for extra in self.extra_states(inputs) {
             if inputs.contains(&extra) {
-                let loc = match extra.strip_suffix(LAGGED_SUFFIX) {
-                    Some(u) if extra != FLIGHT_TIME => format!(".actuator_lag.{u}"),
-                    _ => ".thrust_decay".to_string(),
+                let loc = if let Some(x) = extra.strip_suffix(DOT_LAGGED_SUFFIX) {
+                    format!(".acceleration_lag.{x}")
+                } else if let Some(u) = extra.strip_suffix(LAGGED_SUFFIX) {
+                    format!(".actuator_lag.{u}")
+                } else {
+                    ".thrust_decay".to_string()
                 };
                 return Err(ModelError::new(
                     label,
@@ -273,6 +319,13 @@ impl Corrections {
         };
         if !self.actuator_lag.is_empty() {
             lines.push(format!("  actuator lag: {}", per_input(&self.actuator_lag)));
+        }
+        if !self.acceleration_lag.is_empty() {
+            let per_state: Vec<String> = LAGGABLE_STATES
+                .iter()
+                .filter_map(|x| self.acceleration_lag.get(*x).map(|v| format!("{x} {v} s")))
+                .collect();
+            lines.push(format!("  acceleration lag: {}", per_state.join(", ")));
         }
         if !self.latency.is_empty() {
             lines.push(format!(

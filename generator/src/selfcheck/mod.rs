@@ -13,7 +13,7 @@ pub mod report;
 pub use cases::{default_cases, Case, Magnitude};
 pub use report::{CaseResult, SelfCheck};
 
-use crate::diagnose::{diagnose, DiagnoseOptions};
+use crate::diagnose::{base_side, diagnose_with_reference, DiagnoseOptions};
 use crate::identify::bounded_selection::select_bounded;
 use crate::identify::dataset::{build, DatasetOptions};
 use crate::identify::horizon_check::HorizonCheck;
@@ -47,10 +47,16 @@ impl Default for SelfCheckOptions {
     }
 }
 
-fn fly(plant: &PlantFile, seconds: f64, seed: u64, label: &str) -> Result<FlightLog, String> {
+/// Fly `seconds` of excitation: the log as flown (with the plant's sensor noise) and the same
+/// flight logged without sensor noise.
+fn fly(plant: &PlantFile, seconds: f64, seed: u64, label: &str) -> Result<(FlightLog, FlightLog), String> {
     let log = simulate(plant, &SimulateOptions::new(vec![Profile::Excite], vec![seconds], seed))
         .map_err(|e| format!("{label}: {e}"))?;
-    parse_log(&log.to_csv(), label).map_err(|e| e.to_string())
+    let parse = |l: &crate::sim::SimulatedLog, label: &str| parse_log(&l.to_csv(), label).map_err(|e| e.to_string());
+    Ok((
+        parse(&log, label)?,
+        parse(&log.noise_free(), &format!("{label}, noise-free"))?,
+    ))
 }
 
 /// The nominal plant with realistic sensor noise: what every case starts from.
@@ -93,24 +99,19 @@ pub fn run(
     let nominal = load(plants.join("nominal.json"))?;
     let noise = load(plants.join("effects/sensor_noise.json"))?;
     let base = base_plant(&nominal, &noise);
-    let base_log = fly(&base, options.base_seconds, options.seed, "nominal (identification)")?;
+    let (base_log, _) = fly(&base, options.base_seconds, options.seed, "nominal (identification)")?;
     let model = identify_base(std::slice::from_ref(&base_log))?;
-    // Fresh nominal logs first: their held-out errors are the noise floor of the gap shrink.
-    let mut order: Vec<usize> = (0..options.cases.len()).collect();
-    order.sort_by_key(|&i| !options.cases[i].effects.is_empty());
-    let mut floor: Option<std::collections::BTreeMap<String, f64>> = None;
-    let mut results = vec![None; options.cases.len()];
-    for (done, &i) in order.iter().enumerate() {
-        let case = &options.cases[i];
+    let mut results = Vec::with_capacity(options.cases.len());
+    for (i, case) in options.cases.iter().enumerate() {
         let plant = case.plant(&base, plants)?;
         let seed = options.seed + 100 * (i as u64 + 1);
-        let train = fly(
+        let (train, _) = fly(
             &plant,
             options.train_seconds,
             seed,
             &format!("{} (training)", case.name()),
         )?;
-        let test = fly(
+        let (test, reference) = fly(
             &plant,
             options.test_seconds,
             seed + 1,
@@ -120,22 +121,22 @@ pub fn run(
             where_analysis: false,
             ..DiagnoseOptions::default()
         };
-        let d = diagnose(&model, &[train], &[test], &diag_options).map_err(|e| format!("{}: {e}", case.name()))?;
-        if case.effects.is_empty() && floor.is_none() {
-            let mut f = std::collections::BTreeMap::new();
-            for e in &d.effects {
-                for (ch, v) in &e.heldout_rmse_before {
-                    f.entry(ch.clone()).or_insert(*v);
-                }
-            }
-            floor = Some(f);
-        }
-        results[i] = Some(CaseResult::new(case, &d, floor.as_ref()));
-        progress(done + 1, options.cases.len(), &case.name());
+        let d = diagnose_with_reference(&model, &[train], &[test], &[reference], &diag_options)
+            .map_err(|e| format!("{}: {e}", case.name()))?;
+        // The same held-out flight without the effect: the base model's own error there.
+        let (_, without) = fly(
+            &base,
+            options.test_seconds,
+            seed + 1,
+            &format!("{} (held out, without the effect)", case.name()),
+        )?;
+        let without = base_side(&model, &[without], &diag_options).map_err(|e| format!("{}: {e}", case.name()))?;
+        results.push(CaseResult::new(case, &d, Some(&without)));
+        progress(i + 1, options.cases.len(), &case.name());
     }
     Ok(SelfCheck {
         base_model_terms: model_terms(&model),
-        results: results.into_iter().flatten().collect(),
+        results,
     })
 }
 

@@ -134,6 +134,26 @@ pub struct SimulatedLog {
     pub rate_hz: f64,
 }
 
+impl SimulatedLog {
+    /// The same flight logged without sensor noise: every row's true states, except that a held
+    /// row repeats the previous row as in the measured log (sample-and-hold is part of the logging,
+    /// not of the noise). The self-check scores the model gap on it (`docs/diagnosis.md`).
+    pub fn noise_free(&self) -> SimulatedLog {
+        let mut out = self.clone();
+        let mut previous: Option<([f64; 12], usize)> = None;
+        for r in &mut out.rows {
+            r.x = match previous {
+                Some((x, segment)) if r.held && segment == r.segment => x,
+                _ => r.true_x,
+            };
+            previous = Some((r.x, r.segment));
+        }
+        out.metadata
+            .push(("sensor_noise".into(), "removed: true states, held rows kept".into()));
+        out
+    }
+}
+
 /// Fly `opts.profiles` with the plant of `file`. Deterministic for a given seed.
 pub fn simulate(file: &PlantFile, opts: &SimulateOptions) -> Result<SimulatedLog, PlantError> {
     file.validate()?;
