@@ -108,7 +108,8 @@ fn thrust_gain_at_hover_is_kappa_g() {
     // With the base accelerating, κ scales its acceleration plus g: v̇z = 2·1 + κ (2 + g).
     let f = ir.eval_f(&HOVER, &[1.0, 0.5, 0.0, 0.0]);
     assert_eq!(f[8], 2.0 + 0.08 * (2.0 + G));
-    assert_eq!(f[6], 0.5 + 0.08 * 0.5);
+    // Vertical only: the horizontal rows keep the base model's acceleration.
+    assert_eq!(f[6], 0.5);
     // PD: g is the model's gravity; pd_hover hovers at the origin with zero input.
     let mut pd = shipped("pd_hover.json");
     pd["gravity"] = json!(9.7);
@@ -271,10 +272,10 @@ fn all_corrections_together_are_the_sum_of_the_equations() {
             for k in 0..3 {
                 let (lin, quad) = ([0.27, 0.27, 0.5][k], [0.02, 0.02, 0.04][k]);
                 let thrust = a[k] + if k == 2 { g } else { 0.0 };
-                let mut expected = a[k] - lin * vel[k] - quad * speed * vel[k] + [0.1, -0.05, 0.02][k] + 0.08 * thrust
-                    - 0.0008 * tf * thrust;
+                let mut expected = a[k] - lin * vel[k] - quad * speed * vel[k] + [0.1, -0.05, 0.02][k];
                 if k == 2 {
-                    expected += thrust * rr / (z * z + rr);
+                    // The thrust terms act on the vertical row only.
+                    expected += 0.08 * thrust - 0.0008 * tf * thrust + thrust * rr / (z * z + rr);
                 }
                 let got = f[6 + k];
                 assert!(

@@ -18,6 +18,7 @@ use super::catalogue::linear::columns;
 use super::catalogue::{EffectKind, Family};
 use super::design::{design, design_from, seen_f};
 use super::fit::{profile_sigma, MAX_LAG};
+use super::horizon_rule::horizon_errors;
 use super::score::{delta_bic, lr_z, reduction, sums_masked, taus, Rules, Sums};
 use super::select::{fit_linear, Current, Problem, State};
 
@@ -90,6 +91,9 @@ pub(crate) struct Candidate {
     pub reduction: f64,
     /// The reduction as a share of the base model's held-out RMSE (= `reduction` in round 1).
     pub reduction_of_base: f64,
+    /// Held-out horizon rule ([`super::horizon_rule`]): mean over the 12 states of the MSE ratio
+    /// after/before of free runs over the horizon (None when not evaluated: another rule failed).
+    pub horizon_ratio: Option<f64>,
     pub significant: bool,
     /// Why it is not significant (empty when it is).
     pub reasons: Vec<String>,
@@ -118,6 +122,8 @@ struct Scored {
     z: Option<f64>,
     /// Why the fitted parameters are not acceptable (outside the model format's range).
     invalid: Vec<String>,
+    /// The model with the candidate added, for the horizon rule.
+    after_state: State,
 }
 
 /// Sums with every channel's SSE at least N × floor.
@@ -190,6 +196,23 @@ fn finish(p: &Problem, cur: &Current, after: &After, s: Scored, rules: &Rules) -
             reasons.push(format!("z = {z:.2} is not above {}", rules.min_z));
         }
     }
+    // The horizon rule, only for a candidate that passes the others (free runs cost time).
+    let mut horizon_ratio = None;
+    if reasons.is_empty() {
+        let after = horizon_errors(p, &s.after_state);
+        horizon_ratio = cur.horizon.ratio(&after);
+        if !cur.horizon.allows(&after) {
+            reasons.push(match horizon_ratio {
+                Some(r) if after.diverged <= cur.horizon.diverged => format!(
+                    "it makes the held-out free runs over the horizon worse (mean MSE ratio over the 12 states {r:.3})"
+                ),
+                _ => format!(
+                    "{} held-out free runs over the horizon diverge with it ({} without)",
+                    after.diverged, cur.horizon.diverged
+                ),
+            });
+        }
+    }
     Candidate {
         kind: s.kind,
         channels: s.channels,
@@ -207,6 +230,7 @@ fn finish(p: &Problem, cur: &Current, after: &After, s: Scored, rules: &Rules) -
         delta_bic_test,
         reduction: red,
         reduction_of_base: gained,
+        horizon_ratio,
         significant: reasons.is_empty(),
         reasons,
     }
@@ -262,6 +286,11 @@ fn linear(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &R
     } else {
         vec![0, 1, 2]
     };
+    let after_state = State {
+        linear: kinds,
+        theta: per_fit.clone(),
+        ..state.clone()
+    };
     let scored = Scored {
         kind,
         channels,
@@ -271,6 +300,7 @@ fn linear(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &R
         k: own,
         z: Some(z),
         invalid,
+        after_state,
     };
     finish(p, cur, &after, scored, rules)
 }
@@ -456,16 +486,36 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
         });
     }
     // Kept channels, strongest first; a lag channel is left out where a stronger one already acts
-    // on its rows (an input lag and the lag of a row it drives are alternatives, not a pair).
+    // on its rows (an input lag and the lag of a row it drives are alternatives, not a pair), and
+    // any channel that makes the held-out free runs worse on top of the ones kept before it
+    // ([`super::horizon_rule`]).
     let mut kept: Vec<usize> = (0..scans.len()).filter(|&q| scans[q].param.kept).collect();
     kept.sort_by(|&a, &b| scans[b].param.z.total_cmp(&scans[a].param.z));
     let mut used: Vec<usize> = Vec::new();
+    let mut accepted = (state.transform, cur.horizon.clone());
     for q in kept {
         let overlaps = used
             .iter()
             .any(|&u| scans[u].aff.iter().any(|c| scans[q].aff.contains(c)));
-        if kind == EffectKind::Latency || !overlaps {
+        if kind != EffectKind::Latency && overlaps {
+            scans[q].param.kept = false;
+            continue;
+        }
+        let trial = with_channel(&accepted.0, kind, scans[q].param.input, scans[q].param.value);
+        let errors = if cur.horizon.n > 0 {
+            horizon_errors(
+                p,
+                &State {
+                    transform: trial,
+                    ..state.clone()
+                },
+            )
+        } else {
+            accepted.1.clone()
+        };
+        if cur.horizon.n == 0 || accepted.1.allows(&errors) {
             used.push(q);
+            accepted = (trial, errors);
         } else {
             scans[q].param.kept = false;
         }
@@ -495,6 +545,14 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
     channels.sort_unstable();
     channels.dedup();
     let z = used.iter().map(|&q| scans[q].param.z).fold(0.0, f64::max);
+    let mut transform = state.transform;
+    for &q in &used {
+        transform = with_channel(&transform, kind, scans[q].param.input, scans[q].param.value);
+    }
+    let after_state = State {
+        transform,
+        ..state.clone()
+    };
     let install = Install::Input(
         used.iter()
             .map(|&q| (scans[q].param.input, scans[q].param.value))
@@ -509,6 +567,7 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
         k: used.len(),
         z: Some(z),
         invalid: Vec::new(),
+        after_state,
     };
     finish(p, cur, &after, scored, rules)
 }
@@ -553,6 +612,10 @@ fn stale(p: &Problem, state: &State, cur: &Current, rules: &Rules) -> Candidate 
     } else {
         (cur.residual.clone(), Params::NotApplicable, Install::Nothing)
     };
+    let after_state = State {
+        destale: applicable,
+        ..state.clone()
+    };
     let scored = Scored {
         kind: EffectKind::StaleSamples,
         channels: all.clone(),
@@ -562,6 +625,7 @@ fn stale(p: &Problem, state: &State, cur: &Current, rules: &Rules) -> Candidate 
         k: 0,
         z: None,
         invalid: Vec::new(),
+        after_state,
     };
     finish(p, cur, &after, scored, rules)
 }

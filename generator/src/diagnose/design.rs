@@ -59,12 +59,10 @@ impl Design {
     }
 }
 
-/// Effects whose horizontal columns are left out of the fit (set to 0 in Φ̃): the thrust
-/// magnitude effects. Their horizontal part κ T_xy is right only for a base model whose horizontal
-/// rows are built from the thrust magnitude (the PD model); a SINDy model's horizontal rows are
-/// g·tilt terms whose thrust magnitude is implicit in the altitude-hold equilibrium, so fitting κ
-/// on them measures the model's structure rather than the effect. The corrected model applies the
-/// `corrections` block's full form (the shrink figures show what its horizontal part does).
+/// Effects that act on the vertical row only (their horizontal columns are 0): the thrust
+/// magnitude effects, as in the `corrections` block (docs/model-format.md): behind an autopilot
+/// that holds the commanded vertical speed the horizontal acceleration at a given tilt returns to
+/// g·tan(tilt) once the vertical loop has compensated a thrust or mass mismatch.
 pub(crate) fn vertical_only(kind: EffectKind) -> bool {
     matches!(kind, EffectKind::ThrustGain | EffectKind::ThrustDecay)
 }

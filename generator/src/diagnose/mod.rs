@@ -29,6 +29,7 @@ mod data;
 mod design;
 mod envelope;
 pub mod fit;
+mod horizon_rule;
 mod plots;
 mod report_json;
 mod report_md;

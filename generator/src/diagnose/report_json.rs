@@ -50,6 +50,9 @@ pub struct EffectReport {
     pub heldout_reduction_of_base: f64,
     pub delta_bic_train: f64,
     pub z: f64,
+    /// The horizon rule: mean over the 12 states of the held-out MSE ratio after/before of free
+    /// runs over the horizon (≤ 1 to be named; null when another rule failed first).
+    pub heldout_horizon_ratio: Option<f64>,
     pub significant: bool,
     /// Named in the verdict.
     pub selected: bool,
@@ -153,6 +156,7 @@ pub fn effect_report(c: &Candidate, round: usize, selected: bool, rotor_radius: 
         heldout_reduction_of_base: c.reduction_of_base,
         delta_bic_train: c.delta_bic_train,
         z: c.z,
+        heldout_horizon_ratio: c.horizon_ratio,
         significant: c.significant,
         selected,
         round,

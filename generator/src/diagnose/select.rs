@@ -18,6 +18,7 @@ use super::catalogue::EffectKind;
 use super::data::Prepared;
 use super::design::{design, Design};
 use super::fit::Normal;
+use super::horizon_rule::{horizon_errors, HorizonErrors};
 use super::residuals::Base;
 use super::score::{sums_masked, Rules, Sums};
 use super::DiagnoseOptions;
@@ -127,6 +128,9 @@ pub(crate) struct Current {
     pub residual: Vec<Vec<Vec<[f64; 6]>>>,
     /// The base model's held-out sums (of the first round), the reference of the reduction rule.
     pub base_test: Sums,
+    /// The held-out horizon errors of the model so far ([`super::horizon_rule`]; empty outside
+    /// the selection rounds).
+    pub horizon: HorizonErrors,
 }
 
 pub(crate) fn current(p: &Problem, state: &State) -> Current {
@@ -145,6 +149,7 @@ pub(crate) fn current(p: &Problem, state: &State) -> Current {
         designs,
         residual,
         base_test: Sums::default(),
+        horizon: HorizonErrors::default(),
     }
 }
 
@@ -361,6 +366,7 @@ pub(crate) fn select(
         let mut cur = current(p, &state);
         let base = *base_test.get_or_insert_with(|| test_sums(p, &cur.residual));
         cur.base_test = base;
+        cur.horizon = horizon_errors(p, &state);
         // The total grows by a round's candidates as rounds start.
         let total = done + remaining.len();
         let mut candidates = Vec::new();

@@ -78,7 +78,7 @@ pub(crate) fn run(
     out
 }
 
-fn wrapped(p: &[f64; 12], o: &[f64; 12]) -> [f64; 12] {
+pub(crate) fn wrapped(p: &[f64; 12], o: &[f64; 12]) -> [f64; 12] {
     let mut p = *p;
     p[YAW] = o[YAW] + wrap_angle(p[YAW] - o[YAW]);
     p

@@ -8,7 +8,7 @@
 //! rows after that replacement and T = a + g e_z (the thrust acceleration):
 //!
 //! ```text
-//! v̇ = a − D₁ v − D₂ √(‖v‖² + ε²) v + b + κ T + c t_f T + e_z gain T_z ρ²
+//! v̇ = a − D₁ v − D₂ √(‖v‖² + ε²) v + b + e_z (κ + c t_f + gain ρ²) T_z
 //!     D₁, D₂ = diag(xy, xy, z) of the linear and quadratic drag, ε = 0.1 m/s,
 //!     ρ² = r² / (z² + r²) with r = R/4, t_f = flight_time
 //! ṡ = (u − s) / τ        for each lagged input
@@ -102,20 +102,16 @@ pub fn apply(g: &mut Graph, model: &Model, c: &Corrections, vars: &[Id], base: V
             delta[k].push(g.constant(b[k]));
         }
     }
-    // κ T
+    // e_z κ T_z
     if let Some(kappa) = c.thrust_gain {
         let kappa = g.constant(kappa);
-        for k in 0..3 {
-            delta[k].push(g.mul(kappa, thrust[k]));
-        }
+        delta[2].push(g.mul(kappa, thrust[2]));
     }
-    // c · t_f · T (flight_time is the last state)
+    // e_z c · t_f · T_z (flight_time is the last state)
     if let Some(d) = c.thrust_decay {
         let rate = g.constant(d.per_second);
         let scale = g.mul(rate, vars[nx - 1]);
-        for k in 0..3 {
-            delta[k].push(g.mul(scale, thrust[k]));
-        }
+        delta[2].push(g.mul(scale, thrust[2]));
     }
     // e_z · gain · T_z · r² / (z² + r²), r = R/4
     if let Some(e) = c.ground_effect {

@@ -10,10 +10,14 @@
 //! linear_drag     −diag(xy, xy, z) v
 //! quadratic_drag  −diag(xy, xy, z) √(‖v‖² + ε²) v          ε = 0.1 m/s
 //! force_bias      b
-//! thrust_gain     κ T
-//! thrust_decay    c · flight_time · T                       extra state flight_time, d/dt = 1
+//! thrust_gain     e_z · κ · T_z
+//! thrust_decay    e_z · c · flight_time · T_z               extra state flight_time, d/dt = 1
 //! ground_effect   e_z · gain · T_z · ρ²,  ρ² = (R/4)² / (z² + (R/4)²)
 //! ```
+//!
+//! The thrust terms act on the vertical row only: behind an autopilot that holds the commanded
+//! vertical speed, a thrust or mass mismatch shows in the vertical response, while the horizontal
+//! acceleration at a given tilt returns to g·tan(tilt) once the vertical loop has compensated.
 //!
 //! `actuator_lag` adds a state `<input>_lagged` per listed input, d/dt = (u − s)/τ, which the
 //! base model and the other corrections see instead of the input; `acceleration_lag` adds a state
@@ -57,10 +61,10 @@ pub struct Corrections {
     /// Δv̇ = b, in m/s² (world frame).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_bias: Option<[f64; 3]>,
-    /// Δv̇ = κ (v̇_base + g e_z), dimensionless.
+    /// Δv̇_z = κ (v̇_base,z + g), dimensionless.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub thrust_gain: Option<f64>,
-    /// Δv̇ = c · flight_time · (v̇_base + g e_z).
+    /// Δv̇_z = c · flight_time · (v̇_base,z + g).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub thrust_decay: Option<ThrustDecay>,
     /// Δv̇_z = gain · (v̇_base,z + g) · ρ².

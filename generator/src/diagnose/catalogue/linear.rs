@@ -91,8 +91,11 @@ pub fn regressors(kind: EffectKind, s: &Sample, ctx: &Context, out: &mut [[f64; 
             out[1] = [0.0, 1.0, 0.0];
             out[2] = [0.0, 0.0, 1.0];
         }
-        EffectKind::ThrustGain => out[0] = thrust,
-        EffectKind::ThrustDecay => out[0] = thrust.map(|a| s.flight_time * a),
+        // Vertical only: behind an autopilot that holds the commanded vertical speed, a thrust or
+        // mass mismatch shows in the vertical response; the horizontal acceleration at a given
+        // tilt is g·tan(tilt) once the vertical loop has compensated (docs/model-format.md).
+        EffectKind::ThrustGain => out[0] = [0.0, 0.0, thrust[2]],
+        EffectKind::ThrustDecay => out[0] = [0.0, 0.0, s.flight_time * thrust[2]],
         EffectKind::GroundEffect => out[0] = [0.0, 0.0, thrust[2] * ground_factor(s.x[2], ctx.rotor_radius)],
         _ => {}
     }
@@ -136,7 +139,7 @@ mod tests {
         let d = delta(EffectKind::QuadraticDrag, &[0.1, 0.2], &s, &ctx);
         assert!((d[0] + 0.1 * sp).abs() < 1e-15 && (d[2] + 0.2 * sp * 0.5).abs() < 1e-15);
         let d = delta(EffectKind::ThrustGain, &[0.1], &s, &ctx);
-        assert!((d[2] - 0.1 * 10.81).abs() < 1e-12 && (d[0] - 0.04).abs() < 1e-15);
+        assert!((d[2] - 0.1 * 10.81).abs() < 1e-12 && d[0] == 0.0 && d[1] == 0.0);
         let d = delta(EffectKind::ThrustDecay, &[-0.001], &s, &ctx);
         assert!((d[2] + 0.01 * 10.81).abs() < 1e-12);
         let d = delta(EffectKind::GroundEffect, &[1.0], &s, &ctx);

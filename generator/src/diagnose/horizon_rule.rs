@@ -1,0 +1,91 @@
+//! The horizon rule: an effect is named only if it does not make the held-out free runs over the
+//! MPC horizon worse. The one-step score can reward a correction that fits the next sample while
+//! the model drifts further over N samples (a lag added to a base row that is itself too slow
+//! makes the loop more oscillatory); the corrected model exists for the MPC, which predicts over
+//! the horizon.
+//!
+//! ```text
+//! R = mean_i  MSE_i,after / MSE_i,before      over the 12 states (yaw wrapped), free runs of N
+//!                                             samples from every STRIDE-th held-out sample
+//! ```
+//!
+//! R > 1 (or more diverged runs after than before) fails the rule. For `latency` and
+//! `actuator_lag` every kept channel must pass it on top of the stronger ones
+//! ([`super::candidate`]). Runs use the parameters of each test fit (cross-validation: each fold's
+//! named linear parameters; the scanned delays and lags of the fit on all training data).
+
+use super::augmented::Augmented;
+use super::data::GROUND_CLEARANCE;
+use super::select::{Problem, State};
+use super::shrink::{run, wrapped};
+
+/// A run starts at every STRIDE-th held-out sample.
+pub(crate) const STRIDE: usize = 3;
+
+/// Pooled horizon errors of one model on the held-out data.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct HorizonErrors {
+    pub sse: [f64; 12],
+    pub n: usize,
+    pub runs: usize,
+    pub diverged: usize,
+}
+
+impl HorizonErrors {
+    /// R of `after` against `self` (None without samples).
+    pub fn ratio(&self, after: &HorizonErrors) -> Option<f64> {
+        if self.n == 0 || after.n == 0 {
+            return None;
+        }
+        let r: Vec<f64> = (0..12)
+            .filter(|&i| self.sse[i] > 0.0)
+            .map(|i| (after.sse[i] / after.n as f64) / (self.sse[i] / self.n as f64))
+            .collect();
+        (!r.is_empty()).then(|| r.iter().sum::<f64>() / r.len() as f64)
+    }
+
+    /// The rule: not worse on average over the states, and no more diverged runs.
+    pub fn allows(&self, after: &HorizonErrors) -> bool {
+        after.diverged <= self.diverged && self.ratio(after).map_or(true, |r| r <= 1.0)
+    }
+}
+
+/// The horizon errors of the model `state` describes, on the held-out data of every test fit.
+pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {
+    let horizon = p.options.horizon;
+    let segs = p.data.variant(state.destale);
+    let mut out = HorizonErrors::default();
+    for i in p.test_fits() {
+        let (linear, _) = super::corrected::linear_parameters(state, &state.theta[i]);
+        let aug = Augmented {
+            base: p.base,
+            ctx: p.ctx,
+            linear,
+            transform: state.transform,
+        };
+        for &s in &p.fits[i].test {
+            let seg = &segs[s];
+            let seen = aug.seen_inputs(seg);
+            let ground: Vec<bool> = seg.x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
+            for k in (0..seg.len().saturating_sub(horizon)).step_by(STRIDE) {
+                if ground[k..=k + horizon].iter().any(|g| *g) {
+                    continue;
+                }
+                out.runs += 1;
+                let pred = run(&aug, seg, &seen, k, horizon);
+                if pred.len() < horizon {
+                    out.diverged += 1;
+                }
+                for (j, pr) in pred.iter().enumerate() {
+                    let o = &seg.x[k + j + 1];
+                    let pr = wrapped(pr, o);
+                    for q in 0..12 {
+                        out.sse[q] += (pr[q] - o[q]).powi(2);
+                    }
+                    out.n += 1;
+                }
+            }
+        }
+    }
+    out
+}
