@@ -834,3 +834,25 @@ fn nominal_plant_is_reproduced_by_a_model_identified_from_it() {
         );
     }
 }
+
+/// The noise-free copy of a log (the self-check's reference): the true states row for row, the
+/// held rows still repeating the row before, everything else as flown.
+#[test]
+fn noise_free_copy_keeps_the_flight_and_its_held_rows() {
+    let mut p = plant_file("effects/sample_hold.json");
+    p.effects.sensor_noise = plant_file("effects/sensor_noise.json").effects.sensor_noise;
+    let log = simulate(&p, &SimulateOptions::new(vec![Profile::Excite], vec![10.0], 4)).unwrap();
+    let clean = log.noise_free();
+    assert_eq!(clean.rows.len(), log.rows.len());
+    let held = log.rows.iter().filter(|r| r.held).count();
+    assert!(held > 50, "{held} held rows");
+    for (k, (a, b)) in log.rows.iter().zip(&clean.rows).enumerate() {
+        assert_eq!((a.t, a.u, a.held, a.true_x), (b.t, b.u, b.held, b.true_x), "row {k}");
+        if b.held && k > 0 {
+            assert_eq!(b.x, clean.rows[k - 1].x, "row {k}: held");
+        } else {
+            assert_eq!(b.x, b.true_x, "row {k}: true states");
+            assert_ne!(a.x, b.x, "row {k}: the log as flown has noise");
+        }
+    }
+}

@@ -32,8 +32,11 @@ pub(crate) struct InputParam {
     pub sigma: Option<f64>,
     /// Likelihood-ratio z of this channel alone.
     pub z: f64,
-    /// Part of the effect (z above the threshold).
+    /// Part of the effect: z above the threshold, no stronger kept channel on the same rows,
+    /// and the held-out free runs not worse with it.
     pub kept: bool,
+    /// Why a channel that moved is not part of the effect.
+    pub not_kept: Option<String>,
 }
 
 /// The fitted parameters of a candidate (fit on all training data).
@@ -480,6 +483,7 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
                 sigma,
                 z,
                 kept: z > rules.min_z && value > 0.0,
+                not_kept: (value > 0.0 && z <= rules.min_z).then(|| format!("z = {z:.2} is not above {}", rules.min_z)),
             },
             aff,
             chosen,
@@ -499,6 +503,7 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
             .any(|&u| scans[u].aff.iter().any(|c| scans[q].aff.contains(c)));
         if kind != EffectKind::Latency && overlaps {
             scans[q].param.kept = false;
+            scans[q].param.not_kept = Some("a stronger kept channel acts on the same rows".to_string());
             continue;
         }
         let trial = with_channel(&accepted.0, kind, scans[q].param.input, scans[q].param.value);
@@ -518,6 +523,12 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
             accepted = (trial, errors);
         } else {
             scans[q].param.kept = false;
+            scans[q].param.not_kept = Some(match accepted.1.ratio(&errors) {
+                Some(r) if errors.diverged <= accepted.1.diverged => {
+                    format!("the held-out free runs over the horizon get worse with it (mean MSE ratio {r:.3})")
+                }
+                _ => "held-out free runs diverge with it".to_string(),
+            });
         }
     }
     used.sort_unstable();

@@ -89,3 +89,35 @@ pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ratio_is_the_mean_per_state_mse_ratio() {
+        let before = HorizonErrors {
+            sse: [2.0; 12],
+            n: 10,
+            runs: 4,
+            diverged: 0,
+        };
+        let mut after = before.clone();
+        after.sse[0] = 4.0; // twice the error in x
+        after.sse[1] = 0.0; // none in y
+                            // (2 + 0 + 10 · 1)/12 = 1.
+        assert_eq!(before.ratio(&after), Some(1.0));
+        assert!(before.allows(&after));
+        after.sse[2] = 2.2;
+        assert!(before.ratio(&after).unwrap() > 1.0 && !before.allows(&after));
+        // Fewer samples after (a diverged run) are compared per sample, and fail the rule.
+        let mut shorter = before.clone();
+        shorter.n = 5;
+        shorter.sse = [1.0; 12];
+        shorter.diverged = 1;
+        assert_eq!(before.ratio(&shorter), Some(1.0));
+        assert!(!before.allows(&shorter));
+        // Without data the rule does not apply.
+        assert!(HorizonErrors::default().allows(&after));
+    }
+}

@@ -19,6 +19,10 @@ pub struct InputScan {
     pub z: f64,
     /// Part of the effect.
     pub kept: bool,
+    /// Why a channel that moved is not part of the effect (z, a stronger channel on the same
+    /// rows, or the horizon rule).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub not_kept: Option<String>,
 }
 
 /// One catalogued effect in report.json.
@@ -172,6 +176,7 @@ pub fn effect_report(c: &Candidate, round: usize, selected: bool, rotor_radius: 
                         sigma: s.sigma,
                         z: s.z,
                         kept: s.kept,
+                        not_kept: s.not_kept.clone(),
                     })
                     .collect(),
             ),

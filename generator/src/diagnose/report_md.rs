@@ -169,6 +169,24 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
             let _ = writeln!(s, "- {}: {why}", e.name);
         }
     }
+    // Delay and lag channels that moved but are not part of their effect.
+    let left_out: Vec<String> = d
+        .effects
+        .iter()
+        .flat_map(|e| {
+            e.scan.iter().flatten().filter_map(move |c| {
+                c.not_kept
+                    .as_ref()
+                    .map(|why| format!("- {} {} {:.3} s: {why}", e.name, c.input, c.value))
+            })
+        })
+        .collect();
+    if !left_out.is_empty() {
+        let _ = writeln!(s, "\nScanned channels that moved but were left out:\n");
+        for line in left_out {
+            let _ = writeln!(s, "{line}");
+        }
+    }
     let _ = writeln!(s);
 
     let sh = &d.shrink;

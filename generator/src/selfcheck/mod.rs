@@ -5,7 +5,9 @@
 //! realistic and at a small magnitude (and for pairs of effects), the simulator flies a training and
 //! a held-out log with that effect, and `diagnose` must name the matching catalogue effect first
 //! and shrink the held-out one-step error of the affected channels; fresh nominal logs must give
-//! `none`. See `docs/diagnosis.md`.
+//! `none`. The shrink is measured on the held-out flight logged without sensor noise, against the
+//! base model's error on the same flight flown without the effect (the gap the effect opened).
+//! See `docs/diagnosis.md`.
 
 pub mod cases;
 pub mod report;
