@@ -18,7 +18,7 @@ use super::catalogue::linear::columns;
 use super::catalogue::{EffectKind, Family};
 use super::design::{design, design_from, seen_f};
 use super::fit::{profile_sigma, MAX_LAG};
-use super::horizon_rule::horizon_errors;
+use super::horizon_rule::{horizon_errors, HorizonErrors};
 use super::score::{delta_bic, lr_z, reduction, sums_masked, taus, Rules, Sums};
 use super::select::{fit_linear, Current, Problem, State};
 
@@ -125,8 +125,10 @@ struct Scored {
     z: Option<f64>,
     /// Why the fitted parameters are not acceptable (outside the model format's range).
     invalid: Vec<String>,
-    /// The model with the candidate added, for the horizon rule.
+    /// The model with the candidate added, for the horizon rule, and its horizon errors if
+    /// already known.
     after_state: State,
+    after_horizon: Option<HorizonErrors>,
 }
 
 /// Sums with every channel's SSE at least N × floor.
@@ -202,7 +204,7 @@ fn finish(p: &Problem, cur: &Current, after: &After, s: Scored, rules: &Rules) -
     // The horizon rule, only for a candidate that passes the others (free runs cost time).
     let mut horizon_ratio = None;
     if reasons.is_empty() {
-        let after = horizon_errors(p, &s.after_state);
+        let after = s.after_horizon.unwrap_or_else(|| horizon_errors(p, &s.after_state));
         horizon_ratio = cur.horizon.ratio(&after);
         if !cur.horizon.allows(&after) {
             reasons.push(match horizon_ratio {
@@ -304,6 +306,7 @@ fn linear(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &R
         z: Some(z),
         invalid,
         after_state,
+        after_horizon: None,
     };
     finish(p, cur, &after, scored, rules)
 }
@@ -532,6 +535,8 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
         }
     }
     used.sort_unstable();
+    // The kept channels' free runs were just computed.
+    let after_horizon = (!used.is_empty() && cur.horizon.n > 0).then_some(accepted.1);
     if used.is_empty() {
         if let Some(q) = (0..scans.len()).max_by(|&a, &b| scans[a].param.z.total_cmp(&scans[b].param.z)) {
             used.push(q);
@@ -579,6 +584,7 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
         z: Some(z),
         invalid: Vec::new(),
         after_state,
+        after_horizon,
     };
     finish(p, cur, &after, scored, rules)
 }
@@ -637,6 +643,7 @@ fn stale(p: &Problem, state: &State, cur: &Current, rules: &Rules) -> Candidate 
         z: None,
         invalid: Vec::new(),
         after_state,
+        after_horizon: None,
     };
     finish(p, cur, &after, scored, rules)
 }

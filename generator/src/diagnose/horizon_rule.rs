@@ -14,7 +14,6 @@
 //! ([`super::candidate`]). Runs use the parameters of each test fit (cross-validation: each fold's
 //! named linear parameters; the scanned delays and lags of the fit on all training data).
 
-use super::augmented::Augmented;
 use super::data::GROUND_CLEARANCE;
 use super::select::{Problem, State};
 use super::shrink::{run, wrapped};
@@ -56,13 +55,7 @@ pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {
     let segs = p.data.variant(state.destale);
     let mut out = HorizonErrors::default();
     for i in p.test_fits() {
-        let (linear, _) = super::corrected::linear_parameters(state, &state.theta[i]);
-        let aug = Augmented {
-            base: p.base,
-            ctx: p.ctx,
-            linear,
-            transform: state.transform,
-        };
+        let aug = p.augmented(state, i);
         for &s in &p.fits[i].test {
             let seg = &segs[s];
             let seen = aug.seen_inputs(seg);

@@ -475,45 +475,17 @@ fn run(
         total: 0,
         what: "shrink: free runs before and after",
     });
-    let plain = Augmented::plain(&base, ctx);
-    let (mut before, mut after) = (shrink::Pool::default(), shrink::Pool::default());
-    for i in problem.test_fits() {
-        let (lin, _) = corrected::linear_parameters(&state, &state.theta[i]);
-        let aug = Augmented {
-            base: &base,
-            ctx,
-            linear: lin,
-            transform: state.transform,
-        };
-        for &s in &problem.fits[i].test {
-            before.add(&plain, &data.raw[s], options.horizon);
-            after.add(&aug, &data.variant(state.destale)[s], options.horizon);
-        }
-    }
+    let (before, after) = shrink::pools(&problem, &state, |s, destaled| Some(&data.variant(destaled)[s]));
     // The same on the noise-free copies of the held-out logs (same stretches, same parameters).
     let reference = if reference.is_empty() {
         None
     } else {
         let refdata = data::prepare(&base, &options.savgol, options.residual, &[], reference, 1)?;
         let key = |s: &data::SegData| (s.log, s.segment, s.part);
-        let (mut before, mut after) = (shrink::Pool::default(), shrink::Pool::default());
-        for i in problem.test_fits() {
-            let (lin, _) = corrected::linear_parameters(&state, &state.theta[i]);
-            let aug = Augmented {
-                base: &base,
-                ctx,
-                linear: lin,
-                transform: state.transform,
-            };
-            for &s in &problem.fits[i].test {
-                let k = key(&data.raw[s]);
-                let Some(r) = refdata.raw.iter().position(|d| key(d) == k) else {
-                    continue;
-                };
-                before.add(&plain, &refdata.raw[r], options.horizon);
-                after.add(&aug, &refdata.variant(state.destale)[r], options.horizon);
-            }
-        }
+        let (before, after) = shrink::pools(&problem, &state, |s, destaled| {
+            let r = refdata.raw.iter().position(|d| key(d) == key(&data.raw[s]))?;
+            Some(&refdata.variant(destaled)[r])
+        });
         Some(ReferenceShrink {
             data: "the held-out flights logged without sensor noise".to_string(),
             before: before.side(),
@@ -554,7 +526,7 @@ fn run(
             what: "where: residual analysis",
         });
         let segs: Vec<&data::SegData> = data.raw.iter().filter(|s| !s.holdout).collect();
-        where_link::where_input(&plain, &segs, options.horizon, train)
+        where_link::where_input(&Augmented::plain(&base, ctx), &segs, options.horizon, train)
     });
     let where_report = where_input
         .as_ref()

@@ -11,6 +11,7 @@
 //! delay or lag of a candidate are fitted per fold on the other folds; the input transforms of
 //! effects already named, and all reported parameters, come from the fit on all training data.
 
+use super::augmented::Augmented;
 use super::candidate::{evaluate, Candidate, Install};
 use super::catalogue::inputs::{InputTransform, LAG_CHANNELS};
 use super::catalogue::linear::{linear_kinds, Context};
@@ -65,6 +66,17 @@ impl Problem<'_> {
     /// The fit on all training data, whose parameters are reported and written.
     pub fn final_fit(&self) -> usize {
         self.fits.len() - 1
+    }
+
+    /// The model `state` describes with the parameters of fit `i`, to step exactly.
+    pub fn augmented(&self, state: &State, i: usize) -> Augmented<'_> {
+        let (linear, _) = super::corrected::linear_parameters(state, &state.theta[i]);
+        Augmented {
+            base: self.base,
+            ctx: self.ctx,
+            linear,
+            transform: state.transform,
+        }
     }
 }
 

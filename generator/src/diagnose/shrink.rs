@@ -7,6 +7,7 @@ use super::augmented::Augmented;
 use super::catalogue::CHANNELS;
 use super::data::{SegData, GROUND_CLEARANCE};
 use super::residuals::{filter, ResidualKind};
+use super::select::{Problem, State};
 use crate::evaluate::{wrap_angle, DIVERGENCE_BOUND};
 use crate::logs::{STATE_COLUMNS, YAW};
 use crate::metrics::{compare, Metrics};
@@ -82,6 +83,24 @@ pub(crate) fn wrapped(p: &[f64; 12], o: &[f64; 12]) -> [f64; 12] {
     let mut p = *p;
     p[YAW] = o[YAW] + wrap_angle(p[YAW] - o[YAW]);
     p
+}
+
+/// The base model (on `seg(s, false)`) and the model `state` describes (on `seg(s, state.destale)`),
+/// pooled over the test segments s of every test fit, with that fit's parameters; `seg` gives the
+/// data of segment s, raw or with stale rows interpolated (None: left out).
+pub(crate) fn pools<'d>(p: &Problem, state: &State, seg: impl Fn(usize, bool) -> Option<&'d SegData>) -> (Pool, Pool) {
+    let plain = Augmented::plain(p.base, p.ctx);
+    let (mut before, mut after) = (Pool::default(), Pool::default());
+    for i in p.test_fits() {
+        let aug = p.augmented(state, i);
+        for &s in &p.fits[i].test {
+            if let (Some(raw), Some(variant)) = (seg(s, false), seg(s, state.destale)) {
+                before.add(&plain, raw, p.options.horizon);
+                after.add(&aug, variant, p.options.horizon);
+            }
+        }
+    }
+    (before, after)
 }
 
 impl Pool {

@@ -19,7 +19,7 @@
 //! Every correction is evaluated with the base model's `a` at the same state and input, then
 //! they are summed. Latency is not part of f.
 
-use crate::model::corrections::{LAGGABLE_STATES, QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
+use crate::model::corrections::{DOT_LAGGED_SUFFIX, LAGGABLE_STATES, QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
 use crate::model::{Corrections, Dynamics, Model};
 use crate::symbolic::{Graph, Id};
 
@@ -57,14 +57,11 @@ pub fn effective_inputs(model: &Model, vars: &[Id]) -> Vec<Id> {
 /// ẋ of the corrected model from the base model's rows `base` (one per base state).
 pub fn apply(g: &mut Graph, model: &Model, c: &Corrections, vars: &[Id], base: Vec<Id>) -> Vec<Id> {
     let (nxb, nx) = (model.base_nx(), model.nx());
-    // The acceleration lag states ℓ (after the input lag states) replace their base rows.
-    let input_lags = model.inputs.iter().filter(|u| c.lag(u).is_some()).count();
-    let mut dot_lags: Vec<(usize, Id, f64)> = Vec::new();
-    for (k, name) in LAGGABLE_STATES.iter().enumerate() {
-        if let Some(tau) = c.acceleration_lag(name) {
-            dot_lags.push((VX + k, vars[nxb + input_lags + dot_lags.len()], tau));
-        }
-    }
+    // The acceleration lag states ℓ replace their base rows: (row, ℓ, τ).
+    let dot_lags: Vec<(usize, Id, f64)> = dot_lag_states(model)
+        .into_iter()
+        .map(|(i, tau)| (dot_lag_row(&model.states[i]), vars[i], tau))
+        .collect();
     let targets = base.clone();
     let mut base = base;
     for &(row, l, _) in &dot_lags {
@@ -158,13 +155,21 @@ pub fn dot_lag_states(model: &Model) -> Vec<(usize, f64)> {
     let Some(c) = &model.corrections else {
         return Vec::new();
     };
-    let start = model.base_nx() + model.inputs.iter().filter(|u| c.lag(u).is_some()).count();
-    LAGGABLE_STATES
+    model
+        .states
         .iter()
-        .filter_map(|name| c.acceleration_lag(name))
         .enumerate()
-        .map(|(i, tau)| (start + i, tau))
+        .filter_map(|(i, name)| Some((i, c.acceleration_lag(name.strip_suffix(DOT_LAGGED_SUFFIX)?)?)))
         .collect()
+}
+
+/// The row (standard state index) that the acceleration lag state `name` replaces.
+fn dot_lag_row(name: &str) -> usize {
+    let state = name.strip_suffix(DOT_LAGGED_SUFFIX).unwrap_or(name);
+    VX + LAGGABLE_STATES
+        .iter()
+        .position(|s| *s == state)
+        .expect("an acceleration lag state of a validated block")
 }
 
 /// The rows b the acceleration lag states of `lags` follow, read off `f` = ẋ of the corrected
