@@ -206,17 +206,7 @@ fn finish(p: &Problem, cur: &Current, after: &After, s: Scored, rules: &Rules) -
     if reasons.is_empty() {
         let after = s.after_horizon.unwrap_or_else(|| horizon_errors(p, &s.after_state));
         horizon_ratio = cur.horizon.ratio(&after);
-        if !cur.horizon.allows(&after) {
-            reasons.push(match horizon_ratio {
-                Some(r) if after.diverged <= cur.horizon.diverged => format!(
-                    "it makes the held-out free runs over the horizon worse (mean MSE ratio over the 12 states {r:.3})"
-                ),
-                _ => format!(
-                    "{} held-out free runs over the horizon diverge with it ({} without)",
-                    after.diverged, cur.horizon.diverged
-                ),
-            });
-        }
+        reasons.extend(cur.horizon.objection(&after));
     }
     Candidate {
         kind: s.kind,
@@ -521,17 +511,15 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
         } else {
             accepted.1.clone()
         };
-        if cur.horizon.n == 0 || accepted.1.allows(&errors) {
-            used.push(q);
-            accepted = (trial, errors);
-        } else {
-            scans[q].param.kept = false;
-            scans[q].param.not_kept = Some(match accepted.1.ratio(&errors) {
-                Some(r) if errors.diverged <= accepted.1.diverged => {
-                    format!("the held-out free runs over the horizon get worse with it (mean MSE ratio {r:.3})")
-                }
-                _ => "held-out free runs diverge with it".to_string(),
-            });
+        match (cur.horizon.n > 0).then(|| accepted.1.objection(&errors)).flatten() {
+            None => {
+                used.push(q);
+                accepted = (trial, errors);
+            }
+            Some(why) => {
+                scans[q].param.kept = false;
+                scans[q].param.not_kept = Some(why);
+            }
         }
     }
     used.sort_unstable();

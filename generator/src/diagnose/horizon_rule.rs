@@ -43,9 +43,21 @@ impl HorizonErrors {
         (!r.is_empty()).then(|| r.iter().sum::<f64>() / r.len() as f64)
     }
 
-    /// The rule: not worse on average over the states, and no more diverged runs.
-    pub fn allows(&self, after: &HorizonErrors) -> bool {
-        after.diverged <= self.diverged && self.ratio(after).map_or(true, |r| r <= 1.0)
+    /// The rule — not worse on average over the states, and no more diverged runs: why `after`
+    /// fails it (None when it passes).
+    pub fn objection(&self, after: &HorizonErrors) -> Option<String> {
+        if after.diverged > self.diverged {
+            return Some(format!(
+                "{} held-out free runs over the horizon diverge with it ({} without)",
+                after.diverged, self.diverged
+            ));
+        }
+        match self.ratio(after) {
+            Some(r) if r > 1.0 => Some(format!(
+                "it makes the held-out free runs over the horizon worse (mean MSE ratio over the 12 states {r:.3})"
+            )),
+            _ => None,
+        }
     }
 }
 
@@ -100,17 +112,17 @@ mod tests {
         after.sse[1] = 0.0; // none in y
                             // (2 + 0 + 10 · 1)/12 = 1.
         assert_eq!(before.ratio(&after), Some(1.0));
-        assert!(before.allows(&after));
+        assert!(before.objection(&after).is_none());
         after.sse[2] = 2.2;
-        assert!(before.ratio(&after).unwrap() > 1.0 && !before.allows(&after));
+        assert!(before.ratio(&after).unwrap() > 1.0 && before.objection(&after).is_some());
         // Fewer samples after (a diverged run) are compared per sample, and fail the rule.
         let mut shorter = before.clone();
         shorter.n = 5;
         shorter.sse = [1.0; 12];
         shorter.diverged = 1;
         assert_eq!(before.ratio(&shorter), Some(1.0));
-        assert!(!before.allows(&shorter));
+        assert!(before.objection(&shorter).is_some());
         // Without data the rule does not apply.
-        assert!(HorizonErrors::default().allows(&after));
+        assert!(HorizonErrors::default().objection(&after).is_none());
     }
 }

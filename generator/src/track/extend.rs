@@ -99,12 +99,13 @@ impl StateExtender {
         if let Some(ir) = &self.ir {
             // ℓ over the sample just flown: the base rows at its start and its end under last_u.
             let b1 = dot_lag_targets(&self.dot_lags, &z, &ir.eval_f(&z, last_u));
+            let b0 = self
+                .started
+                .then(|| dot_lag_targets(&self.dot_lags, &self.previous, &ir.eval_f(&self.previous, last_u)));
             for (k, &(i, tau)) in self.dot_lags.iter().enumerate() {
-                let ell = if self.started {
-                    let b0 = dot_lag_targets(&self.dot_lags, &self.previous, &ir.eval_f(&self.previous, last_u));
-                    lag_foh(self.previous[i], b0[k], b1[k], self.dt, tau)
-                } else {
-                    b1[k]
+                let ell = match &b0 {
+                    Some(b0) => lag_foh(self.previous[i], b0[k], b1[k], self.dt, tau),
+                    None => b1[k],
                 };
                 z[i] = ell;
                 self.values[i - 12] = ell;

@@ -150,7 +150,6 @@ pub fn channel_average(u: &[f64], dt: f64, delay: f64, lag: Option<f64>) -> Vec<
 /// ℓ̄_m − b̄_m = −rτ + (ℓ_m − b0_m + rτ) k
 /// ```
 pub fn row_lag(b0: &[f64], b1: &[f64], dt: f64, tau: f64) -> (Vec<f64>, Vec<f64>) {
-    let a = (-dt / tau).exp();
     let k = -(tau / dt) * (-dt / tau).exp_m1();
     let mut ell = b0.first().copied().unwrap_or(0.0);
     let (mut states, mut correction) = (Vec::with_capacity(b0.len()), Vec::with_capacity(b0.len()));
@@ -158,7 +157,7 @@ pub fn row_lag(b0: &[f64], b1: &[f64], dt: f64, tau: f64) -> (Vec<f64>, Vec<f64>
         let rt = (q - p) / dt * tau;
         states.push(ell);
         correction.push(-rt + (ell - p + rt) * k);
-        ell = q - rt + (ell - p + rt) * a;
+        ell = crate::ir::corrections::lag_foh(ell, p, q, dt, tau);
     }
     (states, correction)
 }
