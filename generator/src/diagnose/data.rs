@@ -2,10 +2,10 @@
 //! targets, the base model's filtered one-step residuals ([`super::residuals`]), the stale rows and
 //! the flight time; and the same with stale rows interpolated (the `stale_samples` augmentation).
 
-use super::catalogue::stale::{destale, stale_flags};
 use super::residuals::{filter, impulse, kernel, Base, ResidualKind};
 use super::DiagnoseError;
 use crate::identify::preprocess::{try_columnwise, SavGol};
+use crate::logs::stale::{destale, stale_flags};
 use crate::logs::{median, FlightLog};
 
 /// One stretch of data (a segment, or a part of one for cross-validation).

@@ -12,10 +12,12 @@ mod error;
 mod parse;
 mod quality;
 mod segments;
+pub mod stale;
 
 pub use error::{LogError, LogErrorKind};
 pub use quality::{QualityReport, SegmentQuality, IRREGULAR_FRACTION, RATE_MISMATCH_FRACTION};
 pub use segments::{median, unwrap_angle, SegmentStart, GAP_PERIODS};
+pub use stale::StalePolicy;
 
 use std::path::Path;
 

@@ -17,11 +17,10 @@
 //! ```
 //!
 //! The first six are linear in θ (fitted by least squares, [`linear`]); latency and lag act on the
-//! inputs (scanned over a grid, [`inputs`]); stale samples change the data ([`stale`]).
+//! inputs (scanned over a grid, [`inputs`]); stale samples change the data ([`crate::logs::stale`]).
 
 pub mod inputs;
 pub mod linear;
-pub mod stale;
 
 use serde::Serialize;
 
