@@ -80,7 +80,7 @@ impl Augmented<'_> {
     fn deriv(&self, z: &[f64; NZ], v: &[f64; 4]) -> [f64; NZ] {
         let mut x = [0.0; 12];
         x.copy_from_slice(&z[..12]);
-        let b = self.base.f(&x, &self.effective(z, v));
+        let b = self.transform.model_f(self.base, &x, &self.effective(z, v));
         let mut out = [0.0; NZ];
         out[..12].copy_from_slice(&b);
         for c in 0..6 {
@@ -148,7 +148,7 @@ impl Augmented<'_> {
             // lag (first-order hold between the two, as a flight computer would estimate it).
             let b = |m: usize, at: usize| {
                 let z = pack(&seg.x[at], &s[at], seg.flight_time[at]);
-                self.base.f(&seg.x[at], &self.effective(&z, &v[m]))
+                self.transform.model_f(self.base, &seg.x[at], &self.effective(&z, &v[m]))
             };
             let ends: Vec<([f64; 12], [f64; 12])> = (0..n).map(|m| (b(m, m), b(m, (m + 1).min(n - 1)))).collect();
             for c in 0..6 {

@@ -48,6 +48,8 @@ pub(crate) enum Params {
         sigma: Vec<f64>,
     },
     Input(Vec<InputParam>),
+    /// Per loop (roll, pitch, yaw).
+    Loop(Vec<super::loop_fit::LoopFit>),
     Stale {
         train_rows: usize,
         train_total: usize,
@@ -64,6 +66,8 @@ pub(crate) enum Install {
     Linear(Vec<Vec<f64>>),
     /// (input, value) of the channels that make up the effect.
     Input(Vec<(usize, f64)>),
+    /// The loops' parameters (fit on all training data).
+    Loop([Option<super::catalogue::loops::LoopParams>; super::catalogue::loops::NLOOPS]),
     Stale,
     Nothing,
 }
@@ -103,32 +107,33 @@ pub(crate) struct Candidate {
 }
 
 /// Per-fit residuals after the candidate, per segment (empty where not needed).
-type After = Vec<Vec<Vec<[f64; 6]>>>;
+pub(crate) type After = Vec<Vec<Vec<[f64; 6]>>>;
 
 /// Evaluate `kind` against `state`.
 pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Rules) -> Candidate {
     match kind.family() {
         Family::Linear => linear(p, state, cur, kind, rules),
         Family::Input => input(p, state, cur, kind, rules),
+        Family::Loop => super::loop_fit::evaluate(p, state, cur, rules),
         Family::Data => stale(p, state, cur, rules),
     }
 }
 
-struct Scored {
-    kind: EffectKind,
-    channels: Vec<usize>,
-    scored: Vec<usize>,
-    params: Params,
-    install: Install,
-    k: usize,
+pub(crate) struct Scored {
+    pub kind: EffectKind,
+    pub channels: Vec<usize>,
+    pub scored: Vec<usize>,
+    pub params: Params,
+    pub install: Install,
+    pub k: usize,
     /// z from standard errors (linear effects); the likelihood-ratio z otherwise.
-    z: Option<f64>,
+    pub z: Option<f64>,
     /// Why the fitted parameters are not acceptable (outside the model format's range).
-    invalid: Vec<String>,
+    pub invalid: Vec<String>,
     /// The model with the candidate added, for the horizon rule, and its horizon errors if
     /// already known.
-    after_state: State,
-    after_horizon: Option<HorizonErrors>,
+    pub after_state: State,
+    pub after_horizon: Option<HorizonErrors>,
 }
 
 /// Sums with every channel's SSE at least N × floor.
@@ -139,7 +144,7 @@ fn floored(mut s: Sums, floor: &[f64; 6]) -> Sums {
     s
 }
 
-fn finish(p: &Problem, cur: &Current, after: &After, s: Scored, rules: &Rules) -> Candidate {
+pub(crate) fn finish(p: &Problem, cur: &Current, after: &After, s: Scored, rules: &Rules) -> Candidate {
     let fin = p.final_fit();
     let train = &p.fits[fin].train;
     let train_before = sums_masked(&cur.residual[fin], train, &p.mask);

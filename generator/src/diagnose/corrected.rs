@@ -91,6 +91,17 @@ pub(crate) fn corrections(
             c.actuator_lag.insert(inputs[j].clone(), tau);
         }
     }
+    for (l, m) in state.transform.loops.iter().enumerate() {
+        if let Some(m) = m {
+            c.loop_mismatch.insert(
+                super::catalogue::loops::name(l).to_string(),
+                crate::model::corrections::LoopMismatch {
+                    gain: m.gain,
+                    coupling: m.coupling,
+                },
+            );
+        }
+    }
     for (k, tau) in state.transform.accel_lag.iter().enumerate() {
         if let Some(tau) = tau {
             c.acceleration_lag.insert(CHANNELS[k].to_string(), *tau);

@@ -30,6 +30,7 @@ mod design;
 mod envelope;
 pub mod fit;
 mod horizon_rule;
+mod loop_fit;
 mod plots;
 mod report_json;
 mod report_md;

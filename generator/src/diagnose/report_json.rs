@@ -3,6 +3,7 @@
 use super::candidate::{Candidate, Params};
 use super::catalogue::inputs::lag_channel_name;
 use super::catalogue::linear::parameter_names;
+use super::catalogue::loops;
 use super::catalogue::{EffectKind, CHANNELS};
 use serde::Serialize;
 use serde_json::{json, Value};
@@ -69,6 +70,24 @@ pub struct EffectReport {
     /// Per input channel, for latency and actuator_lag.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scan: Option<Vec<InputScan>>,
+    /// Per loop, for loop_mismatch.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub loops: Option<Vec<LoopScan>>,
+}
+
+/// One fitted loop of `loop_mismatch`.
+#[derive(Clone, Debug, Serialize)]
+pub struct LoopScan {
+    /// The loop's rate state (roll_rate, pitch_rate, yaw_rate).
+    pub rate_state: String,
+    pub gain: f64,
+    pub gain_sigma: f64,
+    pub coupling: f64,
+    pub coupling_sigma: f64,
+    pub z: f64,
+    pub kept: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub not_kept: Option<String>,
 }
 
 fn object(names: &[&str], values: &[f64]) -> Value {
@@ -98,6 +117,11 @@ pub(crate) fn input_value(inputs: &[(usize, f64)]) -> Value {
     Value::Object(inputs.iter().map(|(j, v)| (lag_channel_name(*j), json!(v))).collect())
 }
 
+/// One loop's parameters as reported: gain, coupling and the bandwidth ratio √gain.
+pub(crate) fn loop_value(gain: f64, coupling: f64) -> Value {
+    json!({"gain": gain, "coupling": coupling, "bandwidth_ratio": loops::bandwidth_ratio(gain)})
+}
+
 /// `parameters` and `uncertainty` of a candidate.
 fn parameters(c: &Candidate, rotor_radius: f64) -> (Value, Value) {
     match &c.params {
@@ -119,6 +143,22 @@ fn parameters(c: &Candidate, rotor_radius: f64) -> (Value, Value) {
             };
             let p = shown.iter().map(|s| (lag_channel_name(s.input), json!(s.value)));
             let u = shown.iter().map(|s| (lag_channel_name(s.input), json!(s.sigma)));
+            (Value::Object(p.collect()), Value::Object(u.collect()))
+        }
+        Params::Loop(fits) => {
+            let kept: Vec<_> = fits.iter().filter(|f| f.kept).collect();
+            let shown: Vec<_> = if kept.is_empty() {
+                fits.iter().max_by(|a, b| a.z.total_cmp(&b.z)).into_iter().collect()
+            } else {
+                kept
+            };
+            let p = shown.iter().map(|f| (loops::name(f.l).to_string(), loop_value(f.gain, f.coupling)));
+            let u = shown.iter().map(|f| {
+                (
+                    loops::name(f.l).to_string(),
+                    json!({"gain": f.gain_sigma, "coupling": f.coupling_sigma}),
+                )
+            });
             (Value::Object(p.collect()), Value::Object(u.collect()))
         }
         Params::Stale {
@@ -167,6 +207,23 @@ pub fn effect_report(c: &Candidate, round: usize, selected: bool, rotor_radius: 
         reasons: c.reasons.clone(),
         channels: c.channels.iter().map(|&ch| CHANNELS[ch].to_string()).collect(),
         meaning: c.kind.meaning().to_string(),
+        loops: match &c.params {
+            Params::Loop(fits) => Some(
+                fits.iter()
+                    .map(|f| LoopScan {
+                        rate_state: loops::name(f.l).to_string(),
+                        gain: f.gain,
+                        gain_sigma: f.gain_sigma,
+                        coupling: f.coupling,
+                        coupling_sigma: f.coupling_sigma,
+                        z: f.z,
+                        kept: f.kept,
+                        not_kept: f.not_kept.clone(),
+                    })
+                    .collect(),
+            ),
+            _ => None,
+        },
         scan: match &c.params {
             Params::Input(scan) => Some(
                 scan.iter()

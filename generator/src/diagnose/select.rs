@@ -254,7 +254,12 @@ fn named_inputs(state: &State) -> Vec<(EffectKind, usize)> {
 /// coefficient, and the remainder looks like a third effect).
 fn backfit(p: &Problem, state: &mut State) {
     let inputs = named_inputs(state);
-    if inputs.is_empty() || state.named.len() < 2 {
+    if state.named.len() < 2 {
+        return;
+    }
+    if inputs.is_empty() {
+        super::loop_fit::refit(p, state);
+        refit(p, state);
         return;
     }
     let fin = p.final_fit();
@@ -315,6 +320,7 @@ fn backfit(p: &Problem, state: &mut State) {
                 _ => state.transform.set_lag(j, Some(best.1)),
             }
         }
+        super::loop_fit::refit(p, state);
         refit(p, state);
     }
 }
@@ -333,6 +339,10 @@ fn install(p: &Problem, state: &mut State, c: &Candidate) {
                     _ => state.transform.set_lag(j, Some(v)),
                 }
             }
+            refit(p, state);
+        }
+        Install::Loop(loops) => {
+            state.transform.loops = *loops;
             refit(p, state);
         }
         Install::Stale => {

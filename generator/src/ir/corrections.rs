@@ -19,7 +19,7 @@
 //! Every correction is evaluated with the base model's `a` at the same state and input, then
 //! they are summed. Latency is not part of f.
 
-use crate::model::corrections::{DOT_LAGGED_SUFFIX, LAGGABLE_STATES, QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
+use crate::model::corrections::{DOT_LAGGED_SUFFIX, LOOPS, LAGGABLE_STATES, QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
 use crate::model::{Corrections, Dynamics, Model};
 use crate::symbolic::{Graph, Id};
 
@@ -52,6 +52,52 @@ pub fn effective_inputs(model: &Model, vars: &[Id]) -> Vec<Id> {
             None => vars[nx + i],
         })
         .collect()
+}
+
+/// `loop_mismatch`: each named loop's row of the base model becomes
+/// gain · own + coupling · (row − own), own = the row rebuilt with every variable outside the loop
+/// (its own states and input, [`LOOPS`]) set to 0. `base_vars`: the 12 states, then the inputs the
+/// base model sees; `build` builds the base model's rows on such variables.
+pub fn loop_mismatch(
+    g: &mut Graph,
+    model: &Model,
+    c: &Corrections,
+    base_vars: &[Id],
+    base: &mut [Id],
+    build: impl Fn(&mut Graph, &[Id]) -> Vec<Id>,
+) {
+    for (state, own_states, own_input) in LOOPS {
+        let Some(m) = c.loop_mismatch.get(state) else {
+            continue;
+        };
+        let Some(row) = model.states.iter().position(|s| s == state) else {
+            continue;
+        };
+        let zero = g.zero();
+        let own_vars: Vec<Id> = base_vars
+            .iter()
+            .enumerate()
+            .map(|(k, &v)| {
+                let keep = if k < 12 {
+                    own_states.contains(&model.states[k].as_str())
+                } else {
+                    k - 12 == own_input
+                };
+                if keep {
+                    v
+                } else {
+                    zero
+                }
+            })
+            .collect();
+        let own = build(g, &own_vars)[row];
+        let coupling = g.sub(base[row], own);
+        let gain = g.constant(m.gain);
+        let scaled_own = g.mul(gain, own);
+        let cg = g.constant(m.coupling);
+        let scaled_coupling = g.mul(cg, coupling);
+        base[row] = g.add(scaled_own, scaled_coupling);
+    }
 }
 
 /// ẋ of the corrected model from the base model's rows `base` (one per base state).

@@ -37,10 +37,14 @@ impl ModelIr {
             .copied()
             .chain(corrections::effective_inputs(model, &vars))
             .collect();
-        let base = match &model.dynamics {
-            Dynamics::Pd(p) => pd::dynamics(&mut graph, &base_vars, p),
-            Dynamics::Sindy(s) => sindy::dynamics(&mut graph, &base_vars, s),
+        let build = |graph: &mut Graph, vars: &[Id]| match &model.dynamics {
+            Dynamics::Pd(p) => pd::dynamics(graph, vars, p),
+            Dynamics::Sindy(s) => sindy::dynamics(graph, vars, s),
         };
+        let mut base = build(&mut graph, &base_vars);
+        if let Some(c) = &model.corrections {
+            corrections::loop_mismatch(&mut graph, model, c, &base_vars, &mut base, build);
+        }
         let f = match &model.corrections {
             Some(c) => corrections::apply(&mut graph, model, c, &vars, base),
             None => base,

@@ -80,6 +80,36 @@ pub struct Corrections {
     /// Input name → pure delay in s.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub latency: BTreeMap<String, f64>,
+    /// Attitude or yaw loop (its rate state: roll_rate, pitch_rate, yaw_rate) → the aircraft's
+    /// loop against the base model's: row = gain · own + coupling · (base − own), where `own` is
+    /// the base row with every variable outside the loop set to 0 ([`LOOPS`]).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub loop_mismatch: BTreeMap<String, LoopMismatch>,
+}
+
+/// The loops `loop_mismatch` may name: (rate state, the loop's own states, its own input by
+/// position in the standard inputs u_vz u_roll u_pitch u_yaw_rate). Everything else the base row
+/// reads is the loop's coupling to the other channels.
+pub const LOOPS: [(&str, &[&str], usize); 3] = [
+    ("roll_rate", &["roll", "roll_rate"], 1),
+    ("pitch_rate", &["pitch", "pitch_rate"], 2),
+    ("yaw_rate", &["yaw_rate"], 3),
+];
+
+/// How the aircraft's loop differs from the base model's (`loop_mismatch`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoopMismatch {
+    /// Scale of the loop's own part (1: as the base model). A second-order attitude loop scaled by
+    /// ρ has √ρ times the base model's bandwidth.
+    pub gain: f64,
+    /// Scale of the loop's coupling to the other channels (1: as the base model, 0: none).
+    #[serde(default = "one")]
+    pub coupling: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// Drag coefficients, horizontal (x and y alike, so the drag does not depend on the heading) and
@@ -260,6 +290,30 @@ impl Corrections {
                 );
             }
         }
+        for (name, m) in &self.loop_mismatch {
+            let loc = format!(".loop_mismatch.{name}");
+            let Some(&(_, _, own_input)) = LOOPS.iter().find(|l| l.0 == name) else {
+                let names: Vec<&str> = LOOPS.iter().map(|l| l.0).collect();
+                return Err(ModelError::new(
+                    label,
+                    format!("corrections{loc}"),
+                    K::UnknownVariable,
+                    format!("'{name}' is not a loop's rate state (one of: {})", names.join(", ")),
+                ));
+            };
+            if inputs.len() <= own_input {
+                return bad(&loc, format!("the loop needs input {} of the model", own_input + 1));
+            }
+            if !(m.gain.is_finite() && m.gain > 0.0 && m.gain <= 100.0) {
+                return bad(&format!("{loc}.gain"), format!("must be in (0, 100], found {}", m.gain));
+            }
+            if !(m.coupling.is_finite() && m.coupling.abs() <= 100.0) {
+                return bad(
+                    &format!("{loc}.coupling"),
+                    format!("must be finite with |coupling| ≤ 100, found {}", m.coupling),
+                );
+            }
+        }
         // The extra states must not take a name the model already uses (states are the standard
         // ones, so only an input can clash).
         for extra in self.extra_states(inputs) {
@@ -330,6 +384,17 @@ impl Corrections {
                 .filter_map(|x| self.acceleration_lag.get(*x).map(|v| format!("{x} {v} s")))
                 .collect();
             lines.push(format!("  acceleration lag: {}", per_state.join(", ")));
+        }
+        if !self.loop_mismatch.is_empty() {
+            let per_loop: Vec<String> = LOOPS
+                .iter()
+                .filter_map(|l| {
+                    self.loop_mismatch
+                        .get(l.0)
+                        .map(|m| format!("{} gain {} coupling {}", l.0, m.gain, m.coupling))
+                })
+                .collect();
+            lines.push(format!("  loop mismatch: {}", per_loop.join(", ")));
         }
         if !self.latency.is_empty() {
             lines.push(format!(

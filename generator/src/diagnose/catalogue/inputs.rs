@@ -10,6 +10,8 @@
 //!
 //! (exact for the zero-order-hold v; s̄ → v as τ → 0). Delay then lag when a channel has both.
 
+use super::super::residuals::Base;
+use super::loops::{LoopParams, NLOOPS};
 use serde::Serialize;
 
 /// Lag channels of `actuator_lag`: the 4 inputs, then the 6 acceleration rows (vx … yaw_rate).
@@ -33,6 +35,8 @@ pub struct InputTransform {
     pub lag: [Option<f64>; 4],
     /// First-order lag time constant per acceleration row (vx … yaw_rate), s.
     pub accel_lag: [Option<f64>; 6],
+    /// `loop_mismatch` per loop (roll, pitch, yaw; [`super::loops`]).
+    pub loops: [Option<LoopParams>; NLOOPS],
 }
 
 impl InputTransform {
@@ -40,6 +44,16 @@ impl InputTransform {
         self.delay.iter().all(|d| *d == 0.0)
             && self.lag.iter().all(Option::is_none)
             && self.accel_lag.iter().all(Option::is_none)
+            && self.loops.iter().all(Option::is_none)
+    }
+
+    /// The base model's f at (x, u) (u: the inputs it sees) with the named loop mismatches.
+    pub(crate) fn model_f(&self, base: &Base, x: &[f64; 12], u: &[f64; 4]) -> [f64; 12] {
+        let mut f = base.f(x, u);
+        if self.loops.iter().any(Option::is_some) {
+            super::loops::apply(base, &self.loops, x, u, &mut f);
+        }
+        f
     }
 
     /// The lag of lag channel j (see [`LAG_CHANNELS`]).

@@ -13,6 +13,7 @@
 //! ground_effect   Δv̇_z = k T_z ρ²,  ρ² = (R/4)² / (z² + (R/4)²)          θ = k (R given)
 //! latency         the model sees u_j(t − d_j)                           d_j per input, s
 //! actuator_lag    the model sees s_j, ṡ_j = (u_j − s_j)/τ_j             τ_j per input, s
+//! loop_mismatch   rate row ℓ = gain·own_ℓ + coupling·(b_ℓ − own_ℓ)          (gain, coupling) per loop
 //! stale_samples   rows repeating the previous state are treated as missing (interpolated)
 //! ```
 //!
@@ -21,6 +22,7 @@
 
 pub mod inputs;
 pub mod linear;
+pub mod loops;
 
 use serde::Serialize;
 
@@ -36,6 +38,7 @@ pub enum EffectKind {
     ThrustGain,
     ThrustDecay,
     GroundEffect,
+    LoopMismatch,
     StaleSamples,
 }
 
@@ -46,13 +49,15 @@ pub enum Family {
     Linear,
     /// A transform of the inputs the model sees: a grid scan per input channel.
     Input,
+    /// The base model's loops rescaled: least squares on the rate rows ([`loops`]).
+    Loop,
     /// A transform of the data.
     Data,
 }
 
 impl EffectKind {
     /// Every effect, in catalogue order.
-    pub const ALL: [EffectKind; 9] = [
+    pub const ALL: [EffectKind; 10] = [
         EffectKind::LinearDrag,
         EffectKind::QuadraticDrag,
         EffectKind::ForceBias,
@@ -61,6 +66,7 @@ impl EffectKind {
         EffectKind::ThrustGain,
         EffectKind::ThrustDecay,
         EffectKind::GroundEffect,
+        EffectKind::LoopMismatch,
         EffectKind::StaleSamples,
     ];
 
@@ -75,6 +81,7 @@ impl EffectKind {
             EffectKind::ThrustGain => "thrust_gain",
             EffectKind::ThrustDecay => "thrust_decay",
             EffectKind::GroundEffect => "ground_effect",
+            EffectKind::LoopMismatch => "loop_mismatch",
             EffectKind::StaleSamples => "stale_samples",
         }
     }
@@ -88,6 +95,7 @@ impl EffectKind {
         match self {
             EffectKind::Latency | EffectKind::ActuatorLag => Family::Input,
             EffectKind::StaleSamples => Family::Data,
+            EffectKind::LoopMismatch => Family::Loop,
             _ => Family::Linear,
         }
     }
@@ -103,6 +111,9 @@ impl EffectKind {
             EffectKind::ThrustGain => "thrust per command scaled (payload, mass mismatch)",
             EffectKind::ThrustDecay => "thrust per command changing over the flight (battery sag)",
             EffectKind::GroundEffect => "extra lift near the ground",
+            EffectKind::LoopMismatch => {
+                "the aircraft's attitude or yaw loops differ from the model's (bandwidth, coupling between channels)"
+            }
             EffectKind::StaleSamples => "telemetry rows that repeat the previous state (sample-and-hold)",
         }
     }
