@@ -70,6 +70,11 @@ pub struct DiagnoseArgs {
     /// Skip the "where" residual analysis (and its plots).
     #[arg(long)]
     no_where: bool,
+    /// Stale rows (a row whose 12 states repeat the previous row's): `interpolate` treats them as
+    /// missing samples from the start, so every figure is the one `uavgen evaluate` (same default)
+    /// gives on the same log; `keep` uses the logs as recorded.
+    #[arg(long, value_enum, default_value_t = uavgen::logs::StalePolicy::Interpolate)]
+    stale: uavgen::logs::StalePolicy,
     /// Run the protocol on withheld effects instead (docs/diagnosis.md): the simulator flies nominal
     /// logs and logs with each plant effect; a model identified from the nominal ones is diagnosed
     /// against each. Prints the results; with --out, writes selfcheck.md and selfcheck.json there.
@@ -260,6 +265,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         },
         candidates,
         where_analysis: !args.no_where,
+        stale: args.stale,
         model_text: Some(text),
         source: Some(format!(
             "uavgen {} diagnose --model {} {}{}",

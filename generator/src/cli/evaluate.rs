@@ -24,6 +24,10 @@ pub struct EvaluateArgs {
     /// Write measured-vs-predicted plots (SVG) into this directory.
     #[arg(long)]
     plots: Option<PathBuf>,
+    /// Stale rows (a row whose 12 states repeat the previous row's): `interpolate` treats them as
+    /// missing samples (the default, as identify and diagnose do), `keep` uses the log as recorded.
+    #[arg(long, value_enum, default_value_t = uavgen::logs::StalePolicy::Interpolate)]
+    stale: uavgen::logs::StalePolicy,
 }
 
 pub fn run(args: EvaluateArgs) -> Result<(), String> {
@@ -35,6 +39,7 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
     let options = EvaluateOptions {
         horizon: args.horizon,
         substeps: args.substeps,
+        stale: args.stale,
         ..EvaluateOptions::default()
     };
     let evaluation = evaluate(&model, &logs, &options).map_err(|e| e.to_string())?;

@@ -148,7 +148,8 @@ impl Augmented<'_> {
             // lag (first-order hold between the two, as a flight computer would estimate it).
             let b = |m: usize, at: usize| {
                 let z = pack(&seg.x[at], &s[at], seg.flight_time[at]);
-                self.transform.model_f(self.base, &seg.x[at], &self.effective(&z, &v[m]))
+                self.transform
+                    .model_f(self.base, &seg.x[at], &self.effective(&z, &v[m]))
             };
             let ends: Vec<([f64; 12], [f64; 12])> = (0..n).map(|m| (b(m, m), b(m, (m + 1).min(n - 1)))).collect();
             for c in 0..6 {

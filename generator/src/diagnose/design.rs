@@ -74,12 +74,23 @@ pub(crate) fn seen_f(seg: &SegData, base: &Base, transform: &InputTransform) -> 
         return seg.f.clone();
     }
     let u = transform.apply(&seg.u, seg.dt);
-    let mut f: Vec<[f64; 12]> = seg.x.iter().zip(&u).map(|(x, u)| transform.model_f(base, x, u)).collect();
+    let mut f: Vec<[f64; 12]> = seg
+        .x
+        .iter()
+        .zip(&u)
+        .map(|(x, u)| transform.model_f(base, x, u))
+        .collect();
     if transform.accel_lag.iter().any(Option::is_some) {
         // The rows at the end of each sample under its input.
         let n = f.len();
         let ends: Vec<[f64; 12]> = (0..n)
-            .map(|m| if m + 1 < n { transform.model_f(base, &seg.x[m + 1], &u[m]) } else { f[m] })
+            .map(|m| {
+                if m + 1 < n {
+                    transform.model_f(base, &seg.x[m + 1], &u[m])
+                } else {
+                    f[m]
+                }
+            })
             .collect();
         transform.lag_rows(&mut f, &ends, seg.dt);
     }

@@ -119,7 +119,11 @@ fn solve(
 }
 
 /// `res` with the loops' corrections θ (per loop, None: not part of the effect) subtracted.
-fn subtract(res: &[Vec<[f64; 6]>], cols: &[Vec<[f64; 2 * NLOOPS]>], theta: &[Option<[f64; 2]>; NLOOPS]) -> Vec<Vec<[f64; 6]>> {
+fn subtract(
+    res: &[Vec<[f64; 6]>],
+    cols: &[Vec<[f64; 2 * NLOOPS]>],
+    theta: &[Option<[f64; 2]>; NLOOPS],
+) -> Vec<Vec<[f64; 6]>> {
     res.iter()
         .zip(cols)
         .map(|(r, col)| {
@@ -211,7 +215,13 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
     let invalid = used
         .iter()
         .filter(|&&l| fits[l].gain <= 0.0)
-        .map(|&l| format!("loop_mismatch.{}.gain = {:.3} is not positive", super::catalogue::loops::name(l), fits[l].gain))
+        .map(|&l| {
+            format!(
+                "loop_mismatch.{}.gain = {:.3} is not positive",
+                super::catalogue::loops::name(l),
+                fits[l].gain
+            )
+        })
         .collect();
     let after_state = State {
         transform,

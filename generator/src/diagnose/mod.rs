@@ -88,6 +88,11 @@ pub struct DiagnoseOptions {
     pub model_text: Option<String>,
     /// The `source` of the corrections block (default `uavgen diagnose`).
     pub source: Option<String>,
+    /// Stale rows (docs/logs.md#stale-rows): `Interpolate` (the default) treats them as missing
+    /// from the start — every figure, before and after, is computed on the interpolated data, as
+    /// `uavgen evaluate` and `uavgen identify` do by default, and `stale_samples` is reported as
+    /// a data finding; `Keep` uses the logs as recorded (and leaves `stale_samples` out).
+    pub stale: crate::logs::StalePolicy,
     /// A plant file for the closed-loop comparison (pending: recorded, not used yet).
     pub plant: Option<PathBuf>,
 }
@@ -110,6 +115,7 @@ impl Default for DiagnoseOptions {
             model_text: None,
             source: None,
             plant: None,
+            stale: crate::logs::StalePolicy::Interpolate,
         }
     }
 }

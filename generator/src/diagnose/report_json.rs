@@ -152,7 +152,9 @@ fn parameters(c: &Candidate, rotor_radius: f64) -> (Value, Value) {
             } else {
                 kept
             };
-            let p = shown.iter().map(|f| (loops::name(f.l).to_string(), loop_value(f.gain, f.coupling)));
+            let p = shown
+                .iter()
+                .map(|f| (loops::name(f.l).to_string(), loop_value(f.gain, f.coupling)));
             let u = shown.iter().map(|f| {
                 (
                     loops::name(f.l).to_string(),

@@ -23,6 +23,7 @@ use super::horizon_rule::{horizon_errors, HorizonErrors};
 use super::residuals::Base;
 use super::score::{sums_masked, Rules, Sums};
 use super::DiagnoseOptions;
+use crate::logs::StalePolicy;
 use std::ops::Range;
 
 /// Training and test segments of one fit.
@@ -369,6 +370,24 @@ pub(crate) struct Round {
     pub named: Option<EffectKind>,
 }
 
+/// Apply the `interpolate` stale policy when the data have stale rows: `stale_samples` is
+/// evaluated against the base model (for the report) and installed whatever its score.
+fn stale_first(p: &Problem, state: &mut State, rounds: &mut Vec<Round>, rules: &Rules) -> bool {
+    if p.options.stale != StalePolicy::Interpolate || p.data.destaled.is_none() {
+        return false;
+    }
+    let mut cur = current(p, state);
+    cur.base_test = test_sums(p, &cur.residual);
+    cur.horizon = horizon_errors(p, state);
+    let c = evaluate(p, state, &cur, EffectKind::StaleSamples, rules);
+    rounds.push(Round {
+        candidates: vec![c.clone()],
+        named: Some(EffectKind::StaleSamples),
+    });
+    install(p, state, &c);
+    true
+}
+
 /// The greedy selection; `progress(done, total, name)` after each candidate.
 pub(crate) fn select(
     p: &Problem,
@@ -380,6 +399,16 @@ pub(crate) fn select(
     let mut rounds = Vec::new();
     let mut done = 0;
     let mut base_test: Option<Sums> = None;
+    // The stale-row policy acts before any effect: with `interpolate` the stale rows are missing
+    // samples from the start (scored as a data finding in a round of its own, always applied and
+    // not counted against `max_effects`); with `keep` the logs are used as recorded.
+    let data_effects = usize::from(stale_first(p, &mut state, &mut rounds, rules));
+    let kinds: Vec<EffectKind> = kinds
+        .iter()
+        .copied()
+        .filter(|k| *k != EffectKind::StaleSamples || p.options.stale == StalePolicy::Interpolate)
+        .collect();
+    let kinds = kinds.as_slice();
     loop {
         let remaining: Vec<EffectKind> = kinds.iter().copied().filter(|k| !state.named.contains(k)).collect();
         if remaining.is_empty() {
@@ -413,7 +442,7 @@ pub(crate) fn select(
                 best = Some(lag.clone());
             }
         }
-        let full = state.named.len() + 1 >= rules.max_effects;
+        let full = state.named.len() + 1 >= rules.max_effects + data_effects;
         rounds.push(Round {
             candidates,
             named: best.as_ref().map(|c| c.kind),

@@ -85,7 +85,8 @@ pub(crate) fn wrapped(p: &[f64; 12], o: &[f64; 12]) -> [f64; 12] {
     p
 }
 
-/// The base model (on `seg(s, false)`) and the model `state` describes (on `seg(s, state.destale)`),
+/// The base model and the model `state` describes, both on `seg(s, state.destale)` (the data under
+/// the stale policy, as `uavgen evaluate` computes them),
 /// pooled over the test segments s of every test fit, with that fit's parameters; `seg` gives the
 /// data of segment s, raw or with stale rows interpolated (None: left out).
 pub(crate) fn pools<'d>(p: &Problem, state: &State, seg: impl Fn(usize, bool) -> Option<&'d SegData>) -> (Pool, Pool) {
@@ -94,8 +95,8 @@ pub(crate) fn pools<'d>(p: &Problem, state: &State, seg: impl Fn(usize, bool) ->
     for i in p.test_fits() {
         let aug = p.augmented(state, i);
         for &s in &p.fits[i].test {
-            if let (Some(raw), Some(variant)) = (seg(s, false), seg(s, state.destale)) {
-                before.add(&plain, raw, p.options.horizon);
+            if let Some(variant) = seg(s, state.destale) {
+                before.add(&plain, variant, p.options.horizon);
                 after.add(&aug, variant, p.options.horizon);
             }
         }

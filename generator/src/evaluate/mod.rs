@@ -24,7 +24,7 @@ pub use plot::{plot_states, write_svg, PlotKind};
 use crate::discretize::{auto_substeps, discrete_step, Envelope, SubstepError};
 use crate::identify::dataset::{build, DatasetError, DatasetOptions};
 use crate::ir::ModelIr;
-use crate::logs::{median, FlightLog, Segment, YAW};
+use crate::logs::{median, FlightLog, Segment, StalePolicy, YAW};
 use crate::metrics::{compare, Metrics, MetricsError};
 use crate::model::Model;
 use inputs::{logged, ModelInputs};
@@ -54,6 +54,9 @@ pub struct EvaluateOptions {
     /// How the one-step derivative targets are computed (Savitzky-Golay window and order,
     /// low-pass, edge trimming).
     pub dataset: DatasetOptions,
+    /// What stale rows are (docs/logs.md#stale-rows): by default missing samples, interpolated —
+    /// the same in `identify` and `diagnose`, so their figures are reproduced here.
+    pub stale: StalePolicy,
 }
 
 impl Default for EvaluateOptions {
@@ -62,6 +65,7 @@ impl Default for EvaluateOptions {
             horizon: DEFAULT_HORIZON,
             substeps: None,
             dataset: DatasetOptions::default(),
+            stale: StalePolicy::default(),
         }
     }
 }
@@ -179,6 +183,8 @@ pub struct Evaluation {
     /// Savitzky-Golay window and order of the derivative targets.
     pub savgol_window: usize,
     pub savgol_order: usize,
+    /// The stale-row policy the figures were computed under (`interpolate` or `keep`).
+    pub stale_policy: String,
     pub one_step_derivative: OneStep,
     pub one_step_next: OneStep,
     pub horizon: Horizon,
@@ -485,6 +491,8 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
     if logs.is_empty() {
         return Err(EvaluateError::NoLogs);
     }
+    let logs: Vec<FlightLog> = logs.iter().map(|l| l.with_stale(options.stale)).collect();
+    let logs = logs.as_slice();
     let mut st = Stepper::new(model, options)?;
     let names = model.base_states().to_vec();
     let h = options.horizon;
@@ -585,6 +593,7 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
         divergence_bound: DIVERGENCE_BOUND,
         savgol_window: options.dataset.savgol.window,
         savgol_order: options.dataset.savgol.order,
+        stale_policy: options.stale.name().to_string(),
         one_step_derivative,
         one_step_next,
         horizon,
@@ -656,10 +665,11 @@ impl fmt::Display for Evaluation {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "model {} ({}), {} log(s)",
+            "model {} ({}), {} log(s), stale rows: {}",
             self.model,
             self.model_kind,
-            self.logs.len()
+            self.logs.len(),
+            self.stale_policy
         )?;
         let d = &self.one_step_derivative;
         writeln!(f, "one-step derivative (vx..yaw_rate): {}", overall(&d.metrics))?;

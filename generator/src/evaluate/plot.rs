@@ -33,6 +33,7 @@ pub fn plot_states(
     options: &EvaluateOptions,
     dir: &Path,
 ) -> Result<Vec<PathBuf>, EvaluateError> {
+    let log = &log.with_stale(options.stale);
     let all = traces(model, log, options)?;
     let stem = Path::new(&log.source)
         .file_stem()

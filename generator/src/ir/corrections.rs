@@ -19,7 +19,7 @@
 //! Every correction is evaluated with the base model's `a` at the same state and input, then
 //! they are summed. Latency is not part of f.
 
-use crate::model::corrections::{DOT_LAGGED_SUFFIX, LOOPS, LAGGABLE_STATES, QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
+use crate::model::corrections::{DOT_LAGGED_SUFFIX, LAGGABLE_STATES, LOOPS, QUADRATIC_DRAG_EPSILON, STANDARD_GRAVITY};
 use crate::model::{Corrections, Dynamics, Model};
 use crate::symbolic::{Graph, Id};
 

@@ -10,7 +10,8 @@ use super::{FlightLog, Segment};
 
 /// What a command does with stale rows (`--stale`). The same in `identify`, `evaluate` and
 /// `diagnose`, so a figure one of them reports is reproduced by the others on the same log.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum StalePolicy {
     /// Stale rows are missing samples: their states are interpolated (the default).
     #[default]

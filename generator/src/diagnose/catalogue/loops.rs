@@ -102,7 +102,20 @@ mod tests {
         assert!((own - (-8.0 - 2.0 + 4.0 + 0.5)).abs() < 1e-12, "own {own}");
         assert!((coupling - (-40.0 * 0.3 * 0.5)).abs() < 1e-12, "coupling {coupling}");
         let mut f = b;
-        apply(&base, &[Some(LoopParams { gain: 0.5, coupling: 0.0 }), None, None], &x, &u, &mut f);
+        apply(
+            &base,
+            &[
+                Some(LoopParams {
+                    gain: 0.5,
+                    coupling: 0.0,
+                }),
+                None,
+                None,
+            ],
+            &x,
+            &u,
+            &mut f,
+        );
         assert!((f[9] - 0.5 * own).abs() < 1e-12);
         assert_eq!(f[10], b[10]);
     }
