@@ -313,6 +313,12 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
             if e.selected { "  (named)" } else { "" }
         );
     }
+    if d.verdict.iter().any(|v| v != "none" && v != "stale_samples") {
+        println!("command channels, step response of the corrected model against the base model:");
+        for t in &d.response_times {
+            println!("  {}", t.sentence());
+        }
+    }
     if let (Some(b), Some(a)) = (&d.shrink.before.horizon, &d.shrink.after.horizon) {
         println!(
             "held-out horizon RMSE (overall, {} samples): {:.4} → {:.4}",

@@ -5,7 +5,8 @@
 //! states of the acceleration rows, used for lagged rows)]:
 //!
 //! ```text
-//! ũ_j   = s_j if input j is lagged, else v_j          (v: the delayed input, interval average)
+//! ũ_j   = k_j (s_j if input j is lagged, else v_j)    (v: the delayed input, interval average;
+//!                                                      k_j the input gain, 1 without one)
 //! b     = f(x, ũ)                                     (the base model)
 //! ẋ_i   = ℓ_c if row i = 6 + c is lagged, else b_i; then + Σ Δv̇(x, a, t) on vx vy vz, with a the
 //!         (vx, vy, vz) rows after that replacement
@@ -73,6 +74,7 @@ impl Augmented<'_> {
             if self.transform.lag[j].is_some() {
                 u[j] = z[12 + j];
             }
+            u[j] *= self.transform.gain_of(j);
         }
         u
     }

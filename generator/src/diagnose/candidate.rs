@@ -48,6 +48,8 @@ pub(crate) enum Params {
         sigma: Vec<f64>,
     },
     Input(Vec<InputParam>),
+    /// Per input channel: delay, lag and gain fitted together.
+    Response(Vec<super::response_fit::ChannelFit>),
     /// Per loop (roll, pitch, yaw).
     Loop(Vec<super::loop_fit::LoopFit>),
     Stale {
@@ -66,6 +68,8 @@ pub(crate) enum Install {
     Linear(Vec<Vec<f64>>),
     /// (input, value) of the channels that make up the effect.
     Input(Vec<(usize, f64)>),
+    /// The channels that make up a channel response.
+    Response(Vec<super::response_fit::ChannelFit>),
     /// The loops' parameters (fit on all training data).
     Loop([Option<super::catalogue::loops::LoopParams>; super::catalogue::loops::NLOOPS]),
     Stale,
@@ -115,6 +119,7 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, kind: EffectKi
         Family::Linear => linear(p, state, cur, kind, rules),
         Family::Input => input(p, state, cur, kind, rules),
         Family::Loop => super::loop_fit::evaluate(p, state, cur, rules),
+        Family::Response => super::response_fit::evaluate(p, state, cur, rules),
         Family::Data => stale(p, state, cur, rules),
     }
 }

@@ -84,11 +84,16 @@ pub(crate) fn corrections(
         }
     }
     for j in 0..4 {
-        if state.named.contains(&EffectKind::Latency) && state.transform.delay[j] > 0.0 {
+        let delays_named =
+            state.named.contains(&EffectKind::Latency) || state.named.contains(&EffectKind::ChannelResponse);
+        if delays_named && state.transform.delay[j] > 0.0 {
             c.latency.insert(inputs[j].clone(), state.transform.delay[j]);
         }
         if let Some(tau) = state.transform.lag[j] {
             c.actuator_lag.insert(inputs[j].clone(), tau);
+        }
+        if let Some(k) = state.transform.gain[j] {
+            c.input_gain.insert(inputs[j].clone(), k);
         }
     }
     for (l, m) in state.transform.loops.iter().enumerate() {

@@ -35,6 +35,8 @@ mod plots;
 mod report_json;
 mod report_md;
 mod residuals;
+mod response_fit;
+pub mod response_time;
 pub mod score;
 mod select;
 mod shrink;
@@ -207,6 +209,9 @@ pub struct Diagnosis {
     #[serde(skip)]
     pub corrected: serde_json::Value,
     pub notes: Vec<String>,
+    /// How each command channel answers, base model against corrected model (step responses,
+    /// [`response_time`]).
+    pub response_times: Vec<response_time::ChannelTime>,
     pub options: DiagnoseOptions,
     #[serde(skip)]
     where_input: Option<WhereInput>,
@@ -448,6 +453,31 @@ fn run(
     } else {
         envelope::masks(&data.raw)
     };
+    // Where: the base model's residuals on the training logs.
+    let where_input = options.where_analysis.then(|| {
+        progress(Progress {
+            done: 0,
+            total: 0,
+            what: "where: residual analysis",
+        });
+        let segs: Vec<&data::SegData> = data.raw.iter().filter(|s| !s.holdout).collect();
+        where_link::where_input(&Augmented::plain(&base, ctx), &segs, options.horizon, train)
+    });
+    let where_report = where_input
+        .as_ref()
+        .map(|input| where_link::where_report(input, options.horizon));
+
+    // The delays the cross-correlation finds (command → driven state, prewhitened, significant and
+    // localised) seed channel_response's scan.
+    let mut seeds = [None; 4];
+    if let Some(w) = &where_report {
+        for (j, lag) in w.response_lags.iter().enumerate().take(4) {
+            let x = &lag.xcorr;
+            if x.significant && x.localised && x.peak_seconds > 0.0 {
+                seeds[j] = Some(x.peak_seconds);
+            }
+        }
+    }
     let problem = select::Problem {
         base: &base,
         data: &data,
@@ -458,6 +488,7 @@ fn run(
         input_rows,
         floor,
         mask,
+        seeds,
     };
     let (state, rounds) = select::select(
         &problem,
@@ -466,6 +497,7 @@ fn run(
         &mut |done, total, what| progress(Progress { done, total, what }),
     );
 
+    let response_times = response_time::compare(&problem, &state);
     // Parameters of the named effects: the final fit; per fold for the cross-validated shrink.
     let fin = problem.final_fit();
     let (linear, mut notes) = corrected::linear_parameters(&state, &state.theta[fin]);
@@ -524,20 +556,6 @@ fn run(
             runs: Vec::new(),
         },
     );
-
-    // Where: the base model's residuals on the training logs.
-    let where_input = options.where_analysis.then(|| {
-        progress(Progress {
-            done: 0,
-            total: 0,
-            what: "where: residual analysis",
-        });
-        let segs: Vec<&data::SegData> = data.raw.iter().filter(|s| !s.holdout).collect();
-        where_link::where_input(&Augmented::plain(&base, ctx), &segs, options.horizon, train)
-    });
-    let where_report = where_input
-        .as_ref()
-        .map(|input| where_link::where_report(input, options.horizon));
 
     // The effects: named ones with their round's figures, the others from the last round.
     // Named effects report the final parameters (after the backfitting of later rounds).
@@ -690,6 +708,7 @@ fn run(
         corrections,
         corrected,
         notes,
+        response_times,
         options: options.clone(),
         where_input,
     })

@@ -5,6 +5,7 @@ use super::catalogue::inputs::lag_channel_name;
 use super::catalogue::linear::parameter_names;
 use super::catalogue::loops;
 use super::catalogue::{EffectKind, CHANNELS};
+use super::response_fit::ChannelFit as ResponseFit;
 use serde::Serialize;
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
@@ -70,9 +71,35 @@ pub struct EffectReport {
     /// Per input channel, for latency and actuator_lag.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scan: Option<Vec<InputScan>>,
+    /// Per input channel, for channel_response.
+    #[serde(rename = "channels_fitted", skip_serializing_if = "Option::is_none")]
+    pub channels_scan: Option<Vec<ChannelScan>>,
     /// Per loop, for loop_mismatch.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub loops: Option<Vec<LoopScan>>,
+}
+
+/// One fitted channel of `channel_response`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ChannelScan {
+    pub input: String,
+    /// Delay d, s.
+    pub delay: f64,
+    pub delay_sigma: Option<f64>,
+    /// Lag τ, s (0: none).
+    pub lag: f64,
+    pub lag_sigma: Option<f64>,
+    /// Gain k.
+    pub gain: f64,
+    pub gain_sigma: f64,
+    /// d + τ, s.
+    pub added_time: f64,
+    /// The cross-correlation's delay that seeded the scan, s.
+    pub seed: Option<f64>,
+    pub z: f64,
+    pub kept: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub not_kept: Option<String>,
 }
 
 /// One fitted loop of `loop_mismatch`.
@@ -145,6 +172,28 @@ fn parameters(c: &Candidate, rotor_radius: f64) -> (Value, Value) {
             let u = shown.iter().map(|s| (lag_channel_name(s.input), json!(s.sigma)));
             (Value::Object(p.collect()), Value::Object(u.collect()))
         }
+        Params::Response(fits) => {
+            let kept: Vec<_> = fits.iter().filter(|f| f.kept).collect();
+            let shown: Vec<_> = if kept.is_empty() {
+                fits.iter().max_by(|a, b| a.z.total_cmp(&b.z)).into_iter().collect()
+            } else {
+                kept
+            };
+            let name = |f: &&ResponseFit| lag_channel_name(f.input);
+            let p = shown.iter().map(|f| {
+                (
+                    name(f),
+                    json!({"delay": f.delay, "lag": f.lag, "gain": f.gain, "added_time": f.added_time()}),
+                )
+            });
+            let u = shown.iter().map(|f| {
+                (
+                    name(f),
+                    json!({"delay": f.delay_sigma, "lag": f.lag_sigma, "gain": f.gain_sigma}),
+                )
+            });
+            (Value::Object(p.collect()), Value::Object(u.collect()))
+        }
         Params::Loop(fits) => {
             let kept: Vec<_> = fits.iter().filter(|f| f.kept).collect();
             let shown: Vec<_> = if kept.is_empty() {
@@ -209,6 +258,27 @@ pub fn effect_report(c: &Candidate, round: usize, selected: bool, rotor_radius: 
         reasons: c.reasons.clone(),
         channels: c.channels.iter().map(|&ch| CHANNELS[ch].to_string()).collect(),
         meaning: c.kind.meaning().to_string(),
+        channels_scan: match &c.params {
+            Params::Response(fits) => Some(
+                fits.iter()
+                    .map(|f| ChannelScan {
+                        input: lag_channel_name(f.input),
+                        delay: f.delay,
+                        delay_sigma: f.delay_sigma,
+                        lag: f.lag,
+                        lag_sigma: f.lag_sigma,
+                        gain: f.gain,
+                        gain_sigma: f.gain_sigma,
+                        added_time: f.added_time(),
+                        seed: f.seed,
+                        z: f.z,
+                        kept: f.kept,
+                        not_kept: f.not_kept.clone(),
+                    })
+                    .collect(),
+            ),
+            _ => None,
+        },
         loops: match &c.params {
             Params::Loop(fits) => Some(
                 fits.iter()

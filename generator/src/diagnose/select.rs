@@ -52,9 +52,19 @@ pub(crate) struct Problem<'a> {
     /// Per segment, per interior sample: counted in fits and scores — clear of the ground, and
     /// for held-out samples inside the training envelope ([`super::envelope`]).
     pub mask: Vec<Vec<bool>>,
+    /// Per input, the delay the residual analysis's cross-correlation found (s), if any: a grid
+    /// point of `channel_response`'s scan.
+    pub seeds: [Option<f64>; 4],
 }
 
 impl Problem<'_> {
+    /// The median sample period of the segments, s.
+    pub fn dt(&self) -> f64 {
+        let mut dts: Vec<f64> = self.data.raw.iter().map(|s| s.dt).collect();
+        dts.sort_by(f64::total_cmp);
+        dts.get(dts.len() / 2).copied().unwrap_or(0.0)
+    }
+
     /// The fits whose test segments are scored.
     pub fn test_fits(&self) -> Range<usize> {
         if self.cv {
@@ -235,8 +245,9 @@ fn refit(p: &Problem, state: &mut State) {
 /// The named input channels: (effect, input index).
 fn named_inputs(state: &State) -> Vec<(EffectKind, usize)> {
     let mut out = Vec::new();
+    let delays_named = state.named.contains(&EffectKind::Latency) || state.named.contains(&EffectKind::ChannelResponse);
     for j in 0..4 {
-        if state.named.contains(&EffectKind::Latency) && state.transform.delay[j] > 0.0 {
+        if delays_named && state.transform.delay[j] > 0.0 {
             out.push((EffectKind::Latency, j));
         }
     }
@@ -339,6 +350,14 @@ fn install(p: &Problem, state: &mut State, c: &Candidate) {
                     EffectKind::Latency => state.transform.delay[j] = v,
                     _ => state.transform.set_lag(j, Some(v)),
                 }
+            }
+            refit(p, state);
+        }
+        Install::Response(fits) => {
+            for f in fits {
+                state.transform.delay[f.input] = f.delay;
+                state.transform.lag[f.input] = (f.lag > 0.0).then_some(f.lag);
+                state.transform.gain[f.input] = Some(f.gain);
             }
             refit(p, state);
         }

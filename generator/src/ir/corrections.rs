@@ -36,22 +36,29 @@ pub fn gravity(model: &Model) -> f64 {
 }
 
 /// The inputs the base model sees: for each input, the variable of its lag state if it is
-/// lagged, the input itself otherwise. `vars` are all graph variables (states then inputs).
-pub fn effective_inputs(model: &Model, vars: &[Id]) -> Vec<Id> {
+/// lagged, the input itself otherwise; times its `input_gain` if it has one. `vars` are all graph variables (states then inputs).
+pub fn effective_inputs(g: &mut Graph, model: &Model, vars: &[Id]) -> Vec<Id> {
     let (nxb, nx) = (model.base_nx(), model.nx());
     let mut next_lag = nxb;
-    model
-        .inputs
-        .iter()
-        .enumerate()
-        .map(|(i, name)| match model.corrections.as_ref().and_then(|c| c.lag(name)) {
+    let mut out = Vec::with_capacity(model.inputs.len());
+    for (i, name) in model.inputs.iter().enumerate() {
+        let seen = match model.corrections.as_ref().and_then(|c| c.lag(name)) {
             Some(_) => {
                 next_lag += 1;
                 vars[next_lag - 1]
             }
             None => vars[nx + i],
-        })
-        .collect()
+        };
+        // input_gain: the base model sees k times what reaches it.
+        let k = model.corrections.as_ref().map_or(1.0, |c| c.gain(name));
+        out.push(if k == 1.0 {
+            seen
+        } else {
+            let k = g.constant(k);
+            g.mul(k, seen)
+        });
+    }
+    out
 }
 
 /// `loop_mismatch`: each named loop's row of the base model becomes

@@ -32,11 +32,8 @@ impl ModelIr {
         let vars: Vec<Id> = model.variables().iter().map(|n| graph.var(n)).collect();
         let (nx, nu) = (model.nx(), model.nu());
         // The base model sees its own states and the effective inputs (lag states for lagged inputs).
-        let base_vars: Vec<Id> = vars[..model.base_nx()]
-            .iter()
-            .copied()
-            .chain(corrections::effective_inputs(model, &vars))
-            .collect();
+        let seen = corrections::effective_inputs(&mut graph, model, &vars);
+        let base_vars: Vec<Id> = vars[..model.base_nx()].iter().copied().chain(seen).collect();
         let build = |graph: &mut Graph, vars: &[Id]| match &model.dynamics {
             Dynamics::Pd(p) => pd::dynamics(graph, vars, p),
             Dynamics::Sindy(s) => sindy::dynamics(graph, vars, s),

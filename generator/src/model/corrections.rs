@@ -80,6 +80,10 @@ pub struct Corrections {
     /// Input name → pure delay in s.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub latency: BTreeMap<String, f64>,
+    /// Input name → gain k: the base model sees k times the (delayed, lagged) input — the
+    /// aircraft answers a command more (k > 1) or less than the model.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub input_gain: BTreeMap<String, f64>,
     /// Attitude or yaw loop (its rate state: roll_rate, pitch_rate, yaw_rate) → the aircraft's
     /// loop against the base model's: row = gain · own + coupling · (base − own), where `own` is
     /// the base row with every variable outside the loop set to 0 ([`LOOPS`]).
@@ -150,6 +154,11 @@ impl Corrections {
     /// τ of the acceleration lag on `state`, if it has one.
     pub fn acceleration_lag(&self, state: &str) -> Option<f64> {
         self.acceleration_lag.get(state).copied()
+    }
+
+    /// The gain on `input` (1 when it has none).
+    pub fn gain(&self, input: &str) -> f64 {
+        self.input_gain.get(input).copied().unwrap_or(1.0)
     }
 
     /// The pure delay of `input` in s (0 when it has none).
@@ -290,6 +299,20 @@ impl Corrections {
                 );
             }
         }
+        for (name, &k) in &self.input_gain {
+            let loc = format!(".input_gain.{name}");
+            if !inputs.contains(name) {
+                return Err(ModelError::new(
+                    label,
+                    format!("corrections{loc}"),
+                    K::UnknownVariable,
+                    format!("'{name}' is not an input of the model (inputs: {})", inputs.join(", ")),
+                ));
+            }
+            if !(k.is_finite() && k > 0.0 && k <= 10.0) {
+                return bad(&loc, format!("must be in (0, 10], found {k}"));
+            }
+        }
         for (name, m) in &self.loop_mismatch {
             let loc = format!(".loop_mismatch.{name}");
             let Some(&(_, _, own_input)) = LOOPS.iter().find(|l| l.0 == name) else {
@@ -384,6 +407,16 @@ impl Corrections {
                 .filter_map(|x| self.acceleration_lag.get(*x).map(|v| format!("{x} {v} s")))
                 .collect();
             lines.push(format!("  acceleration lag: {}", per_state.join(", ")));
+        }
+        if !self.input_gain.is_empty() {
+            lines.push(format!(
+                "  input gain: {}",
+                self.input_gain
+                    .iter()
+                    .map(|(u, k)| format!("{u} × {k}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
         }
         if !self.loop_mismatch.is_empty() {
             let per_loop: Vec<String> = LOOPS

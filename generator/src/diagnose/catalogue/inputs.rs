@@ -35,6 +35,8 @@ pub struct InputTransform {
     pub lag: [Option<f64>; 4],
     /// First-order lag time constant per acceleration row (vx … yaw_rate), s.
     pub accel_lag: [Option<f64>; 6],
+    /// Gain per input channel (`input_gain`: the model sees k times the delayed, lagged input).
+    pub gain: [Option<f64>; 4],
     /// `loop_mismatch` per loop (roll, pitch, yaw; [`super::loops`]).
     pub loops: [Option<LoopParams>; NLOOPS],
 }
@@ -45,6 +47,12 @@ impl InputTransform {
             && self.lag.iter().all(Option::is_none)
             && self.accel_lag.iter().all(Option::is_none)
             && self.loops.iter().all(Option::is_none)
+            && self.gain.iter().all(Option::is_none)
+    }
+
+    /// The gain of input channel j (1 without one).
+    pub fn gain_of(&self, j: usize) -> f64 {
+        self.gain[j].unwrap_or(1.0)
     }
 
     /// The base model's f at (x, u) (u: the inputs it sees) with the named loop mismatches.
@@ -101,13 +109,14 @@ impl InputTransform {
     pub fn apply(&self, u: &[[f64; 4]], dt: f64) -> Vec<[f64; 4]> {
         let mut out = u.to_vec();
         for j in 0..4 {
-            if self.delay[j] == 0.0 && self.lag[j].is_none() {
+            if self.delay[j] == 0.0 && self.lag[j].is_none() && self.gain[j].is_none() {
                 continue;
             }
             let col: Vec<f64> = u.iter().map(|r| r[j]).collect();
             let seen = channel_average(&col, dt, self.delay[j], self.lag[j]);
+            let k = self.gain_of(j);
             for (o, v) in out.iter_mut().zip(seen) {
-                o[j] = v;
+                o[j] = k * v;
             }
         }
         out

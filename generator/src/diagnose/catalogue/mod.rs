@@ -13,6 +13,7 @@
 //! ground_effect   Δv̇_z = k T_z ρ²,  ρ² = (R/4)² / (z² + (R/4)²)          θ = k (R given)
 //! latency         the model sees u_j(t − d_j)                           d_j per input, s
 //! actuator_lag    the model sees s_j, ṡ_j = (u_j − s_j)/τ_j             τ_j per input, s
+//! channel_response the model sees k_j lag_τ(u_j(t − d_j))                 (d_j, τ_j, k_j) per input
 //! loop_mismatch   rate row ℓ = gain·own_ℓ + coupling·(b_ℓ − own_ℓ)          (gain, coupling) per loop
 //! stale_samples   rows repeating the previous state are treated as missing (interpolated)
 //! ```
@@ -35,6 +36,7 @@ pub enum EffectKind {
     ForceBias,
     Latency,
     ActuatorLag,
+    ChannelResponse,
     ThrustGain,
     ThrustDecay,
     GroundEffect,
@@ -49,6 +51,8 @@ pub enum Family {
     Linear,
     /// A transform of the inputs the model sees: a grid scan per input channel.
     Input,
+    /// Delay, lag and gain of an input channel together: a 2-D scan and least squares per channel.
+    Response,
     /// The base model's loops rescaled: least squares on the rate rows ([`loops`]).
     Loop,
     /// A transform of the data.
@@ -57,12 +61,13 @@ pub enum Family {
 
 impl EffectKind {
     /// Every effect, in catalogue order.
-    pub const ALL: [EffectKind; 10] = [
+    pub const ALL: [EffectKind; 11] = [
         EffectKind::LinearDrag,
         EffectKind::QuadraticDrag,
         EffectKind::ForceBias,
         EffectKind::Latency,
         EffectKind::ActuatorLag,
+        EffectKind::ChannelResponse,
         EffectKind::ThrustGain,
         EffectKind::ThrustDecay,
         EffectKind::GroundEffect,
@@ -78,6 +83,7 @@ impl EffectKind {
             EffectKind::ForceBias => "force_bias",
             EffectKind::Latency => "latency",
             EffectKind::ActuatorLag => "actuator_lag",
+            EffectKind::ChannelResponse => "channel_response",
             EffectKind::ThrustGain => "thrust_gain",
             EffectKind::ThrustDecay => "thrust_decay",
             EffectKind::GroundEffect => "ground_effect",
@@ -96,6 +102,7 @@ impl EffectKind {
             EffectKind::Latency | EffectKind::ActuatorLag => Family::Input,
             EffectKind::StaleSamples => Family::Data,
             EffectKind::LoopMismatch => Family::Loop,
+            EffectKind::ChannelResponse => Family::Response,
             _ => Family::Linear,
         }
     }
@@ -108,6 +115,7 @@ impl EffectKind {
             EffectKind::ForceBias => "a constant force (steady wind, trim offset, c.g. offset)",
             EffectKind::Latency => "a pure delay between the command and its effect",
             EffectKind::ActuatorLag => "a first-order lag between the command and its effect",
+            EffectKind::ChannelResponse => "per command channel: a delay, a first-order lag and a gain together",
             EffectKind::ThrustGain => "thrust per command scaled (payload, mass mismatch)",
             EffectKind::ThrustDecay => "thrust per command changing over the flight (battery sag)",
             EffectKind::GroundEffect => "extra lift near the ground",

@@ -1,0 +1,135 @@
+//! How each command channel answers, in the base model and in the corrected one: the step
+//! response of the channel's driven state — u_vz → vz, u_roll → roll, u_pitch → pitch,
+//! u_yaw_rate → yaw_rate — from rest (all states 0 at 5 m height, inputs 0), with the named
+//! effects (delays, lags, gains, loop mismatch) stepped exactly ([`super::augmented`]).
+//!
+//! ```text
+//! y(t)  = driven state after a step δ_j of input j at t = 0, minus the same run without the step
+//! gain  = y(T)/δ_j                       (T = 4 s: the loops have settled)
+//! t63   = the first t with |y(t)| ≥ 0.632 |y(T)|  (linear between samples)
+//! ```
+//!
+//! For a first-order-plus-dead-time response t63 = d + τ exactly: the "total response time" of a
+//! channel. The difference corrected − base is what the aircraft adds to the model's own response
+//! (what a user with a simulator needs: "the roll loop answers 0.06 s later than your model").
+
+use super::augmented::{Augmented, Lags};
+use super::catalogue::inputs::delayed;
+use super::select::{Problem, State};
+use serde::Serialize;
+
+/// Driven state per input (u_vz → vz, u_roll → roll, u_pitch → pitch, u_yaw_rate → yaw_rate).
+pub const OUTPUT: [usize; 4] = [8, 3, 4, 11];
+/// Step size per input (in the input's unit: m/s, rad, rad, rad/s).
+pub const STEP: [f64; 4] = [0.5, 0.05, 0.05, 0.3];
+/// Length of the simulated response, s.
+pub const SETTLE: f64 = 4.0;
+
+/// One channel's step response figures.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct Response {
+    /// Time to 63 % of the final value, s (None: no response).
+    pub t63: Option<f64>,
+    /// Final value over the step.
+    pub gain: f64,
+}
+
+/// Base and corrected response of one channel.
+#[derive(Clone, Debug, Serialize)]
+pub struct ChannelTime {
+    pub input: String,
+    pub output: String,
+    pub base: Response,
+    pub corrected: Response,
+}
+
+impl ChannelTime {
+    /// The sentence of the report, e.g. "u_roll → roll: 63 % in 0.21 s (base model 0.14 s, +0.07 s),
+    /// steady gain 0.98 (base 1.00)".
+    pub fn sentence(&self) -> String {
+        let t = |r: &Response| r.t63.map_or("—".to_string(), |t| format!("{t:.3} s"));
+        let diff = match (self.corrected.t63, self.base.t63) {
+            (Some(c), Some(b)) if b > 0.0 => format!(", {:+.3} s, {:.2}× the model's", c - b, c / b),
+            _ => String::new(),
+        };
+        format!(
+            "{} → {}: 63 % in {} (base model {}{diff}); steady gain {:.3} (base {:.3})",
+            self.input,
+            self.output,
+            t(&self.corrected),
+            t(&self.base),
+            self.corrected.gain,
+            self.base.gain
+        )
+    }
+}
+
+/// The step response of input j under `aug`.
+fn respond(aug: &Augmented, j: usize, dt: f64, substeps: usize) -> Response {
+    let n = (SETTLE / dt).ceil() as usize + 1;
+    let run = |delta: f64| -> Vec<f64> {
+        let col = vec![delta; n];
+        let v = delayed(&col, dt, aug.transform.delay[j]);
+        let mut x = [0.0; 12];
+        x[2] = 5.0;
+        let u0 = [0.0; 4];
+        let b = aug.transform.model_f(aug.base, &x, &u0);
+        let mut s: Lags = [0.0; 10];
+        for c in 0..6 {
+            s[4 + c] = b[6 + c];
+        }
+        let mut out = Vec::with_capacity(n);
+        for (m, vm) in v.iter().enumerate() {
+            out.push(x[OUTPUT[j]]);
+            let mut u = [0.0; 4];
+            u[j] = *vm;
+            let (xn, sn) = aug.step(&x, &s, m as f64 * dt, &u, dt, substeps);
+            if !xn.iter().all(|v| v.is_finite()) {
+                break;
+            }
+            x = xn;
+            s = sn;
+        }
+        out
+    };
+    let (with, without) = (run(STEP[j]), run(0.0));
+    let y: Vec<f64> = with.iter().zip(&without).map(|(a, b)| a - b).collect();
+    let last = y.last().copied().unwrap_or(0.0);
+    let gain = last / STEP[j];
+    let level = 0.632 * last.abs();
+    let t63 = (last.abs() > 1e-6 * STEP[j].abs()).then(|| {
+        y.iter().position(|v| v.abs() >= level).map(|k| {
+            if k == 0 {
+                0.0
+            } else {
+                let (a, b) = (y[k - 1].abs(), y[k].abs());
+                let frac = if b > a { (level - a) / (b - a) } else { 1.0 };
+                (k as f64 - 1.0 + frac) * dt
+            }
+        })
+    });
+    Response {
+        t63: t63.flatten(),
+        gain,
+    }
+}
+
+/// Base and corrected step responses of every input channel.
+pub(crate) fn compare(p: &Problem, state: &State) -> Vec<ChannelTime> {
+    let dt = p.dt();
+    if dt <= 0.0 {
+        return Vec::new();
+    }
+    let base_substeps = p.base.substeps(dt, "").unwrap_or(4);
+    let plain = Augmented::plain(p.base, p.ctx);
+    let corrected = p.augmented(state, p.final_fit());
+    let names = crate::logs::STATE_COLUMNS;
+    (0..4)
+        .map(|j| ChannelTime {
+            input: crate::logs::INPUT_COLUMNS[j].to_string(),
+            output: names[OUTPUT[j]].to_string(),
+            base: respond(&plain, j, dt, base_substeps),
+            corrected: respond(&corrected, j, dt, corrected.substeps(dt, base_substeps)),
+        })
+        .collect()
+}
