@@ -96,7 +96,7 @@ struct GenerateArgs {
     /// Output directory (default: ./<crate name>).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// MPC options file: weights, input bounds, QP limits (default: the paper's; see docs/mpc.md).
+    /// MPC options file: weights, input bounds, QP limits (default: the paper's but q yaw 1, r u_yaw_rate 10; examples/mpc_paper.json has the paper's; see docs/mpc.md).
     #[arg(long)]
     mpc: Option<PathBuf>,
 }

@@ -56,7 +56,7 @@ fn report(
 }
 
 /// Each of the paper's trajectories for `seconds`, base vs corrected, with the MPC options file `mpc`
-/// (default: the paper's weights).
+/// (default: `MpcOptions::defaults`).
 pub fn compare(
     base: &Model,
     corrected: &Model,
