@@ -19,14 +19,15 @@ pub struct VerdictRules {
     pub max_distance: f64,
 }
 
-/// Default `--max-rmse`: the paper's best rows and docs/validation.md's tracking runs are 0.22–0.30 m
-/// over 30 s (approach from (3, 3, 5) included); an oscillating loop is metres off.
+/// Default `--max-rmse`: docs/validation.md's delay-aware models track at 0.22–0.29 m over 30 s
+/// (approach from (3, 3, 5) included), its oscillating loops are 0.64–6.6 m off on the circle;
+/// issue 13's acceptance figure.
 pub const DEFAULT_MAX_RMSE: f64 = 0.30;
 /// Default `--max-distance`: 20 m, four times the circle's radius and more than five times the start
 /// state's distance to any trajectory's first point (≤ 3.7 m): a loop that far off a trajectory no
-/// wider than 10 m has lost it. On plants/m100_like.json with the paper's weights the PD loop that
-/// oscillates around the circle peaks at 10.7 m (did not track), the SINDy loop whose oscillation
-/// grows passes 20 m at 8.6 s (diverged).
+/// wider than 10 m has lost it. On plants/m100_like.json with the paper's weights the shipped PD
+/// model with the M100's delays oscillates around the circle with peaks of 10.7 m (did not track),
+/// the delay-aware SINDy model's oscillation grows and passes 20 m at 8.6 s (diverged).
 pub const DEFAULT_MAX_DISTANCE: f64 = 20.0;
 
 impl Default for VerdictRules {
