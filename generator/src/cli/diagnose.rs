@@ -62,7 +62,8 @@ pub struct DiagnoseArgs {
     /// flagged "not recommended for closed loop".
     #[arg(long)]
     plant: Option<PathBuf>,
-    /// MPC options file of the closed-loop comparison (docs/mpc.md; default: `MpcOptions::defaults`).
+    /// MPC options file of the closed-loop comparison (docs/mpc.md; default: the paper's weights but
+    /// q = 1 on yaw and r = 10 on u_yaw_rate, as every command).
     #[arg(long, requires = "plant")]
     mpc: Option<PathBuf>,
     /// Compare the model with the derivative pointwise (ẋ_SG − f(x, u), the identification's target)

@@ -78,11 +78,13 @@ pub struct TrackArgs {
     /// MPC horizon N.
     #[arg(long, default_value_t = 30)]
     horizon: usize,
-    /// MPC options file (weights, bounds; docs/mpc.md): default `MpcOptions::defaults` (docs/mpc.md).
+    /// MPC options file (weights, bounds; docs/mpc.md). Default: the paper's weights and bounds but
+    /// q = 1 on yaw and r = 10 on u_yaw_rate; examples/mpc_paper.json has the paper's own.
     #[arg(long)]
     mpc: Option<PathBuf>,
     /// Largest overall position RMSE (m, whole flight, approach included) of a loop that tracked;
-    /// above it the verdict is `did not track` (exit status 3). `inf`: judge divergence only.
+    /// above it the verdict is `did not track` (exit status 3). The default suits 30 s flights; the
+    /// approach weighs more in shorter ones (about 0.30·√(30/duration)). `inf`: judge divergence only.
     #[arg(long, default_value_t = track::verdict::DEFAULT_MAX_RMSE)]
     max_rmse: f64,
     /// A true position farther than this (m) from the reference is a lost flight: verdict
