@@ -42,13 +42,13 @@ impl Default for VerdictRules {
 impl VerdictRules {
     /// Both thresholds positive (infinity allowed: never judged on that criterion).
     pub fn validate(&self) -> Result<(), String> {
-        if !(self.max_rmse > 0.0) {
+        if self.max_rmse.is_nan() || self.max_rmse <= 0.0 {
             return Err(format!(
                 "--max-rmse: must be a positive number of metres, got {}",
                 self.max_rmse
             ));
         }
-        if !(self.max_distance > 0.0) {
+        if self.max_distance.is_nan() || self.max_distance <= 0.0 {
             return Err(format!(
                 "--max-distance: must be a positive number of metres, got {}",
                 self.max_distance
