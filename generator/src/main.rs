@@ -96,7 +96,7 @@ struct GenerateArgs {
     /// Output directory (default: ./<crate name>).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// MPC options file: weights, input bounds, QP limits (default: the paper's; see docs/mpc.md).
+    /// MPC options file: weights, input bounds, QP limits (default: the paper's but q yaw 1, r u_yaw_rate 10; examples/mpc_paper.json has the paper's; see docs/mpc.md).
     #[arg(long)]
     mpc: Option<PathBuf>,
 }
@@ -153,7 +153,11 @@ fn main() -> ExitCode {
         Some(Command::Identify(args)) => cli::identify::run(args),
         Some(Command::Evaluate(args)) => cli::evaluate::run(args),
         Some(Command::Simulate(args)) => cli::simulate::run(args),
-        Some(Command::Track(args)) => cli::track::run(args),
+        Some(Command::Track(args)) => match cli::track::run(args) {
+            // The verdicts' exit status (0, 3 or 4; docs/track.md).
+            Ok(code) => return code,
+            Err(e) => Err(e),
+        },
         Some(Command::Diagnose(args)) => cli::diagnose::run(args),
         None => generate(cli.generate),
     };

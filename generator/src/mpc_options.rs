@@ -1,5 +1,7 @@
 //! MPC problem options (`uavgen --mpc options.json`): weights, input bounds and
-//! solver limits, with the paper's defaults. See docs/mpc.md.
+//! solver limits, with the defaults every command uses (the generator, `track`, `diagnose --plant`).
+//! The defaults are the paper's except on the heading: q = 1 on yaw and r = 10 on u_yaw_rate
+//! (`examples/mpc_paper.json` has the paper's own). See docs/mpc.md and docs/validation.md.
 
 use crate::model::Model;
 use serde::{Deserialize, Serialize};
@@ -36,19 +38,32 @@ pub struct MpcOptions {
     pub regularisation: f64,
 }
 
-/// Default weight of a state: 2 on positions x, y, z (by name), 0 elsewhere (in particular on
-/// the extra states of a model's corrections).
+/// Default weight of a state: 2 on positions x, y, z (the paper's), 1 on yaw (by name), 0
+/// elsewhere (in particular on the extra states of a model's corrections).
+///
+/// The weight on yaw (the paper's is 0) and on u_yaw_rate ([`default_r`]) hold the heading: with
+/// the paper's weights an MPC built from a delay-aware SINDy model, whose yaw-rate command couples
+/// into roll and pitch, uses the yaw-rate command to tilt and oscillates on the circle (5–8 m RMSE
+/// on plants/m100_like.json, docs/validation.md); with these, every delay-aware model there tracks.
 fn default_q(model: &Model) -> Vec<f64> {
     model
         .states
         .iter()
-        .map(|s| {
-            if matches!(s.as_str(), "x" | "y" | "z") {
-                2.0
-            } else {
-                0.0
-            }
+        .map(|s| match s.as_str() {
+            "x" | "y" | "z" => 2.0,
+            "yaw" => 1.0,
+            _ => 0.0,
         })
+        .collect()
+}
+
+/// Default weight of an input: 10 on u_yaw_rate (by name; see [`default_q`]), the paper's 0.1 on
+/// the others.
+fn default_r(model: &Model) -> Vec<f64> {
+    model
+        .inputs
+        .iter()
+        .map(|n| if n == "u_yaw_rate" { 10.0 } else { 0.1 })
         .collect()
 }
 
@@ -63,13 +78,14 @@ fn default_bound(name: &str) -> f64 {
 }
 
 impl MpcOptions {
-    /// The paper's defaults for `model`.
+    /// The defaults for `model`: the paper's weights and bounds, except q = 1 on yaw and r = 10
+    /// on u_yaw_rate (see [`default_q`]). The one place every command takes its defaults from.
     pub fn defaults(model: &Model) -> Self {
         let q = default_q(model);
         Self {
             q_terminal: q.clone(),
             q,
-            r: vec![0.1; model.nu()],
+            r: default_r(model),
             u_min: model.inputs.iter().map(|n| -default_bound(n)).collect(),
             u_max: model.inputs.iter().map(|n| default_bound(n)).collect(),
             max_qp_iterations: 200,

@@ -372,3 +372,64 @@ fn a_pair_is_named() {
     v.sort();
     assert_eq!(v, vec!["latency".to_string(), "linear_drag".to_string()]);
 }
+
+/// `diagnose --plant`'s closed-loop verdict in the report: a corrected model that flies worse than
+/// the base (issue 13: the circle 5.18 → 7.16 m on m100_like) is flagged as not recommended for
+/// closed loop in report.md and report.json; one that flies better is not.
+#[test]
+fn a_corrected_model_that_flies_worse_is_not_presented_as_the_fix() {
+    use uavgen::diagnose::{ClosedLoop, ClosedLoopRun};
+    use uavgen::track::Verdict;
+    let mut d = run("clean", &Truth::default(), 1);
+    let flight = |name: &str, before: (f64, Verdict), after: (f64, Verdict)| ClosedLoopRun {
+        trajectory: name.into(),
+        seconds: 30.0,
+        rmse_before: before.0,
+        rmse_after: after.0,
+        mae_before: 0.0,
+        mae_after: 0.0,
+        d1_before: 1.0,
+        d1_after: 1.0,
+        out_of_bounds_before: 0,
+        out_of_bounds_after: 0,
+        verdict_before: before.1,
+        verdict_after: after.1,
+    };
+    for (runs, worse) in [
+        (
+            vec![
+                flight("sinusoid", (0.25, Verdict::Tracked), (0.25, Verdict::Tracked)),
+                flight("circle", (5.18, Verdict::DidNotTrack), (7.16, Verdict::DidNotTrack)),
+            ],
+            true,
+        ),
+        (
+            vec![flight("circle", (5.18, Verdict::DidNotTrack), (0.25, Verdict::Tracked))],
+            false,
+        ),
+    ] {
+        let (verdict, note) = uavgen::track::compare::judge(&runs, "plants/m100_like.json");
+        d.shrink.closed_loop = ClosedLoop {
+            status: "measured".into(),
+            plant: Some("plants/m100_like.json".into()),
+            note,
+            verdict: Some(verdict),
+            runs,
+        };
+        let md = d.report_markdown(&[]);
+        let json: serde_json::Value = serde_json::from_str(&d.report_json()).unwrap();
+        let cl = &json["shrink"]["closed_loop"];
+        assert_eq!(cl["verdict"], if worse { "worse" } else { "better" });
+        assert_eq!(
+            md.contains("not recommended for closed loop"),
+            worse,
+            "{}",
+            &md[..md.len().min(800)]
+        );
+        assert_eq!(cl["note"].as_str().unwrap().starts_with("NOT RECOMMENDED"), worse);
+        if worse {
+            assert!(md.contains("circle RMSE 5.180 → 7.160 m"), "{md}");
+            assert_eq!(cl["runs"][1]["verdict_after"], "did not track");
+        }
+    }
+}

@@ -3,8 +3,8 @@
 //! State convention (the standard order of the flight-log format, `LOG_FORMAT.md`):
 //! `x y z roll pitch yaw vx vy vz roll_rate pitch_rate yaw_rate`. The built-in [`Trajectory`]s write
 //! the position into indices 0, 1, 2 and, if `NX ≥ 9`, the analytic inertial velocity into indices
-//! 6, 7, 8; every other entry is 0 (level attitude, yaw 0, no rates). With the paper's weights only
-//! x, y and z are tracked, so the velocities matter only if the weights on vx, vy, vz are non-zero.
+//! 6, 7, 8; every other entry is 0 (level attitude, yaw 0, no rates). With the default weights only
+//! x, y, z and yaw are tracked, so the velocities matter only if the weights on vx, vy, vz are non-zero.
 //! A model with fewer than 3 states gets the first `NX` position components.
 
 use crate::Real;

@@ -57,10 +57,13 @@ pub struct DiagnoseArgs {
     /// Savitzky-Golay polynomial order.
     #[arg(long, default_value_t = 3)]
     savgol_order: usize,
-    /// Plant file for a closed-loop comparison through `uavgen track` (pending: recorded only).
+    /// Plant file for a closed-loop comparison through `uavgen track`: the base and the corrected
+    /// model fly the paper's three trajectories (30 s each); a corrected model that flies worse is
+    /// flagged "not recommended for closed loop".
     #[arg(long)]
     plant: Option<PathBuf>,
-    /// MPC options file of the closed-loop comparison (docs/mpc.md; default: the paper's weights).
+    /// MPC options file of the closed-loop comparison (docs/mpc.md; default: the paper's weights but
+    /// q = 1 on yaw and r = 10 on u_yaw_rate, as every command).
     #[arg(long, requires = "plant")]
     mpc: Option<PathBuf>,
     /// Compare the model with the derivative pointwise (ẋ_SG − f(x, u), the identification's target)
@@ -170,25 +173,21 @@ fn closed_loop(
         )
     };
     match run() {
-        Ok(runs) => uavgen::diagnose::ClosedLoop {
-            status: "measured".into(),
-            plant: Some(plant.display().to_string()),
-            note: runs
-                .iter()
-                .map(|r| {
-                    format!(
-                        "{} position RMSE {:.3} → {:.3} m (MAE {:.3} → {:.3})",
-                        r.trajectory, r.rmse_before, r.rmse_after, r.mae_before, r.mae_after
-                    )
-                })
-                .collect::<Vec<_>>()
-                .join("; "),
-            runs,
-        },
+        Ok(runs) => {
+            let (verdict, note) = uavgen::track::compare::judge(&runs, &plant.display().to_string());
+            uavgen::diagnose::ClosedLoop {
+                status: "measured".into(),
+                plant: Some(plant.display().to_string()),
+                note,
+                verdict: Some(verdict),
+                runs,
+            }
+        }
         Err(e) => uavgen::diagnose::ClosedLoop {
             status: "failed".into(),
             plant: Some(plant.display().to_string()),
             note: e,
+            verdict: None,
             runs: Vec::new(),
         },
     }
@@ -328,6 +327,12 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     if let Some(plant) = &args.plant {
         d.shrink.closed_loop = closed_loop(&model, &d.corrected, plant, args.mpc.as_deref());
         println!("closed loop on {}: {}", plant.display(), d.shrink.closed_loop.note);
+        if d.shrink.closed_loop.verdict.as_deref() == Some("worse") {
+            println!(
+                "verdict for closed loop: the corrections are NOT recommended — the corrected model flies worse than the base on {}",
+                plant.display()
+            );
+        }
     }
     let files = d.write(&args.out, args.force).map_err(|e| e.to_string())?;
     println!("wrote {} files into {}", files.len(), args.out.display());

@@ -2,9 +2,15 @@
 
 use clap::{Args, ValueEnum};
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// Exit status when a loop did not track (none diverged); docs/track.md.
+pub const EXIT_DID_NOT_TRACK: u8 = 3;
+/// Exit status when a loop diverged.
+pub const EXIT_DIVERGED: u8 = 4;
 use uavgen::codegen::GenerateOptions;
 use uavgen::sim::PlantFile;
-use uavgen::track::{self, Backend, GenericBackend, HarnessBackend, TrackOptions, TrackReport};
+use uavgen::track::{self, Backend, GenericBackend, HarnessBackend, TrackOptions, TrackReport, Verdict, VerdictRules};
 use uavgen_runtime::Trajectory;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
@@ -36,6 +42,14 @@ impl TrajectoryArg {
 }
 
 #[derive(Args)]
+#[command(
+    after_help = "Verdict per trajectory (docs/track.md): `tracked` (overall position RMSE ≤ --max-rmse), \
+`did not track` (above it), `diverged` (the flight was lost: the true state not finite, the true position farther \
+than --max-distance from the reference, or the aircraft on the ground; the flight stops there). \
+Exit status: 0 every trajectory tracked; 3 some did not track (none diverged); 4 some diverged \
+(the reports are written in all three cases); 1 an error (nothing written); 2 a usage error. \
+Pass --max-rmse inf to fail on divergence only."
+)]
 pub struct TrackArgs {
     /// Model file (uavgen-model/1) the MPC uses.
     #[arg(long)]
@@ -64,9 +78,19 @@ pub struct TrackArgs {
     /// MPC horizon N.
     #[arg(long, default_value_t = 30)]
     horizon: usize,
-    /// MPC options file (weights, bounds; docs/mpc.md): default the paper's.
+    /// MPC options file (weights, bounds; docs/mpc.md). Default: the paper's weights and bounds but
+    /// q = 1 on yaw and r = 10 on u_yaw_rate; examples/mpc_paper.json has the paper's own.
     #[arg(long)]
     mpc: Option<PathBuf>,
+    /// Largest overall position RMSE (m, whole flight, approach included) of a loop that tracked;
+    /// above it the verdict is `did not track` (exit status 3). The default suits 30 s flights; the
+    /// approach weighs more in shorter ones (about 0.30·√(30/duration)). `inf`: judge divergence only.
+    #[arg(long, default_value_t = track::verdict::DEFAULT_MAX_RMSE)]
+    max_rmse: f64,
+    /// A true position farther than this (m) from the reference is a lost flight: verdict
+    /// `diverged` (exit status 4), the flight stops there.
+    #[arg(long, default_value_t = track::verdict::DEFAULT_MAX_DISTANCE)]
+    max_distance: f64,
     /// Scratch directory for the generated crate and the harness build.
     #[arg(long, default_value = "target/uavgen-track")]
     work_dir: PathBuf,
@@ -76,7 +100,8 @@ fn write(path: &Path, text: &str) -> Result<(), String> {
     std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-pub fn run(args: TrackArgs) -> Result<(), String> {
+/// Runs `uavgen track`; Ok carries the exit status of the verdicts (0, 3 or 4).
+pub fn run(args: TrackArgs) -> Result<ExitCode, String> {
     if args.out.exists() && !args.force {
         return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
     }
@@ -86,6 +111,11 @@ pub fn run(args: TrackArgs) -> Result<(), String> {
             args.duration
         ));
     }
+    let rules = VerdictRules {
+        max_rmse: args.max_rmse,
+        max_distance: args.max_distance,
+    };
+    rules.validate()?;
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
     if model.base_nx() != 12 || model.nu() != 4 {
         return Err(format!(
@@ -125,17 +155,50 @@ pub fn run(args: TrackArgs) -> Result<(), String> {
     // Everything goes to a scratch directory first, renamed into place at the end.
     let tmp = args.out.with_extension("uavgen-tmp");
     let _ = std::fs::remove_dir_all(&tmp);
-    let result = fly_all(&args, &model, &plant, dt, backend.as_mut(), &tmp);
-    if let Err(e) = result {
-        let _ = std::fs::remove_dir_all(&tmp);
-        return Err(e);
-    }
+    let reports = match fly_all(&args, &model, &plant, dt, backend.as_mut(), &tmp, &rules) {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&tmp);
+            return Err(e);
+        }
+    };
     if args.out.exists() {
         std::fs::remove_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
     }
     std::fs::rename(&tmp, &args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
     println!("wrote {}", args.out.display());
-    Ok(())
+    let count = |v: Verdict| reports.iter().filter(|r| r.verdict == v).count();
+    let (tracked, untracked, diverged) = (
+        count(Verdict::Tracked),
+        count(Verdict::DidNotTrack),
+        count(Verdict::Diverged),
+    );
+    let failed: Vec<String> = reports
+        .iter()
+        .filter(|r| r.verdict != Verdict::Tracked)
+        .map(|r| format!("{} {}", r.trajectory, r.verdict))
+        .collect();
+    println!(
+        "verdict: {tracked} of {} tracked{}",
+        reports.len(),
+        if failed.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", failed.join(", "))
+        }
+    );
+    Ok(if diverged > 0 {
+        eprintln!("error: {diverged} loop(s) diverged (exit status {EXIT_DIVERGED})");
+        ExitCode::from(EXIT_DIVERGED)
+    } else if untracked > 0 {
+        eprintln!(
+            "error: {untracked} loop(s) did not track within --max-rmse {} m (exit status {EXIT_DID_NOT_TRACK})",
+            rules.max_rmse
+        );
+        ExitCode::from(EXIT_DID_NOT_TRACK)
+    } else {
+        ExitCode::SUCCESS
+    })
 }
 
 fn fly_all(
@@ -145,7 +208,8 @@ fn fly_all(
     dt: f64,
     backend: &mut dyn Backend,
     tmp: &Path,
-) -> Result<(), String> {
+    rules: &VerdictRules,
+) -> Result<Vec<TrackReport>, String> {
     let several = args.trajectory.len() > 1;
     let mut summary = Vec::new();
     for &which in &args.trajectory {
@@ -159,11 +223,12 @@ fn fly_all(
             trajectory: which.trajectory(),
             duration: args.duration,
             seed: args.seed,
+            max_distance: rules.max_distance,
             ..TrackOptions::default()
         };
         let bar = super::identify::progress_bar((args.duration / dt).round() as usize, which.name());
         let mut extender = track::StateExtender::new(model, dt)?;
-        let samples = track::fly(
+        let flight = track::fly(
             backend,
             plant,
             &options,
@@ -178,17 +243,20 @@ fn fly_all(
             &backend.describe(),
             args.seed,
             dt,
-            &samples,
+            &flight,
             &backend.bounds(),
+            rules,
         );
         write(&dir.join("report.md"), &report.markdown())?;
         let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())? + "\n";
         write(&dir.join("report.json"), &json)?;
-        write(&dir.join("samples.csv"), &track::report::samples_csv(&samples))?;
-        track::plot::write(&samples, which.name(), &dir)?;
+        write(&dir.join("samples.csv"), &track::report::samples_csv(&flight.samples))?;
+        track::plot::write(&flight.samples, which.name(), &dir)?;
         println!(
-            "{}: position RMSE {:.4} m (x {:.4}, y {:.4}, z {:.4}), MAE {:.4}, d1 {:.4}; feedback median {:.1} µs, max {:.1} µs; {} inputs out of bounds",
+            "{}: {} ({}); position RMSE {:.4} m (x {:.4}, y {:.4}, z {:.4}), MAE {:.4}, d1 {:.4}; feedback median {:.1} µs, max {:.1} µs; {} inputs out of bounds",
             which.name(),
+            report.verdict.name().to_uppercase(),
+            report.verdict_reason,
             report.overall.rmse,
             report.axes["x"].rmse,
             report.axes["y"].rmse,
@@ -205,5 +273,5 @@ fn fly_all(
         let json = serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())? + "\n";
         write(&tmp.join("summary.json"), &json)?;
     }
-    Ok(())
+    Ok(summary)
 }

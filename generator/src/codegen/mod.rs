@@ -31,7 +31,7 @@ pub struct GenerateOptions {
     pub crate_name: Option<String>,
     /// Operating envelope for the automatic substep rule.
     pub envelope: Envelope,
-    /// MPC weights, bounds and limits; `None`: the paper's defaults for the model.
+    /// MPC weights, bounds and limits; `None`: `MpcOptions::defaults` for the model.
     pub mpc: Option<MpcOptions>,
 }
 

@@ -553,6 +553,7 @@ fn run(
             status: "not run".to_string(),
             plant: options.plant.as_ref().map(|p| p.display().to_string()),
             note: "give a plant file (`--plant`) to fly the base and the corrected model in closed loop".to_string(),
+            verdict: None,
             runs: Vec::new(),
         },
     );

@@ -83,6 +83,13 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
             .join(" + ")
     };
     let _ = writeln!(s, "Verdict: {verdict}.\n");
+    if d.shrink.closed_loop.verdict.as_deref() == Some("worse") {
+        let _ = writeln!(
+            s,
+            "**The corrections are not recommended for closed loop:** on `{}` the corrected model flies worse than the base (the runs are listed after the per-state table); `corrected.json` is written as a finding, not as the fix.\n",
+            d.shrink.closed_loop.plant.as_deref().unwrap_or("the plant")
+        );
+    }
     let _ = writeln!(
         s,
         "- model: `{}` (SHA-256 {}…), g = {} m/s²",

@@ -202,6 +202,10 @@ pub struct ClosedLoop {
     /// The `--plant` file given, if any.
     pub plant: Option<String>,
     pub note: String,
+    /// `"better"`, `"no change"` or `"worse"`: how the corrected model flies against the base
+    /// (`track::compare::judge`); `"worse"` means the corrections are not recommended for closed
+    /// loop. `None` unless measured.
+    pub verdict: Option<String>,
     /// Per trajectory: the tracking error with the base and with the corrected model.
     pub runs: Vec<ClosedLoopRun>,
 }
@@ -222,6 +226,9 @@ pub struct ClosedLoopRun {
     /// Inputs outside the bounds (must be 0), base and corrected.
     pub out_of_bounds_before: usize,
     pub out_of_bounds_after: usize,
+    /// `uavgen track`'s verdict of each run (default thresholds: docs/track.md).
+    pub verdict_before: crate::track::Verdict,
+    pub verdict_after: crate::track::Verdict,
 }
 
 /// The gap before and after the named effects.

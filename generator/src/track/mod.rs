@@ -13,10 +13,12 @@ pub mod compare;
 pub mod extend;
 pub mod plot;
 pub mod report;
+pub mod verdict;
 
 pub use backend::{Backend, GenericBackend, HarnessBackend, StepAnswer};
 pub use extend::StateExtender;
 pub use report::{TrackReport, TrackSample};
+pub use verdict::{Verdict, VerdictRules};
 
 use crate::sim::{Plant, PlantFile};
 use uavgen_runtime::Trajectory;
@@ -34,6 +36,9 @@ pub struct TrackOptions {
     pub seed: u64,
     /// Initial state of the plant.
     pub start: [f64; 12],
+    /// The flight stops at the first sample that [`verdict::divergence`] calls lost with this
+    /// distance bound (m): non-finite state, farther than this from the reference, on the ground.
+    pub max_distance: f64,
 }
 
 impl Default for TrackOptions {
@@ -43,8 +48,20 @@ impl Default for TrackOptions {
             duration: 30.0,
             seed: 1,
             start: START,
+            max_distance: verdict::DEFAULT_MAX_DISTANCE,
         }
     }
+}
+
+/// The samples of one run.
+#[derive(Clone, Debug)]
+pub struct Flight {
+    /// One per sample flown (the first, at t = 0, is always flown).
+    pub samples: Vec<TrackSample>,
+    /// The samples the duration asked for.
+    pub planned: usize,
+    /// The time and the reason the flight was lost ([`verdict::divergence`]), if it was.
+    pub lost: Option<(f64, String)>,
 }
 
 /// Turns the plant's 12 measured states, the time and the last input into the model's state vector.
@@ -52,13 +69,15 @@ pub type ExtendState<'a> = dyn FnMut(&[f64; 12], f64, &[f64]) -> Vec<f64> + 'a;
 
 /// Fly `options.trajectory` with `backend` controlling a plant built from `plant`; `extend` turns
 /// the plant's 12 measured states into the model's state vector (identity for 12-state models).
+/// A lost flight ([`verdict::divergence`] of the true state at a sample) stops there: that sample
+/// is not flown, and `lost` says when and why.
 pub fn fly(
     backend: &mut dyn Backend,
     plant: &PlantFile,
     options: &TrackOptions,
     extend: &mut ExtendState,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<Vec<TrackSample>, String> {
+) -> Result<Flight, String> {
     if !(options.duration.is_finite() && options.duration > 0.0) {
         return Err(format!(
             "--duration must be a positive number of seconds, got {}",
@@ -69,6 +88,12 @@ pub fn fly(
     p.reset(&options.start);
     let dt = p.sample_period();
     let steps = (options.duration / dt).round() as usize;
+    if steps == 0 {
+        return Err(format!(
+            "--duration {} s is shorter than one sample period ({dt} s)",
+            options.duration
+        ));
+    }
     let (u_min, u_max) = backend.bounds();
     // Hover: zero commands, clamped into the bounds.
     let hover: Vec<f64> = u_min
@@ -82,15 +107,24 @@ pub fn fly(
     let mut last_u = hover.clone();
     for k in 0..steps {
         let t = k as f64 * dt;
+        let reference = options.trajectory.position(t);
+        let truth = p.true_state();
+        if let Some(why) = verdict::divergence(&truth, &reference, options.max_distance).filter(|_| k > 0) {
+            progress(steps, steps);
+            return Ok(Flight {
+                samples,
+                planned: steps,
+                lost: Some((t, why)),
+            });
+        }
         let measured = p.measured();
         let x = extend(&measured, t, &last_u);
         let answer = backend.step(&x)?;
-        let reference = options.trajectory.position(t);
         samples.push(TrackSample {
             t,
             reference,
             measured,
-            truth: p.true_state(),
+            truth,
             answer: answer.clone(),
         });
         let u: [f64; 4] = answer
@@ -102,5 +136,13 @@ pub fn fly(
         last_u = answer.u;
         progress(k + 1, steps);
     }
-    Ok(samples)
+    // The state the last input led to.
+    let t = steps as f64 * dt;
+    let lost =
+        verdict::divergence(&p.true_state(), &options.trajectory.position(t), options.max_distance).map(|why| (t, why));
+    Ok(Flight {
+        samples,
+        planned: steps,
+        lost,
+    })
 }

@@ -1,6 +1,7 @@
 //! The tracking report: metrics per axis and overall, solve times, statuses; Markdown and JSON.
 
-use super::StepAnswer;
+use super::verdict::{judge, Verdict, VerdictRules};
+use super::{Flight, StepAnswer};
 use crate::metrics::{d1, mae, overall, rmse};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -44,6 +45,16 @@ pub struct TrackReport {
     pub duration_s: f64,
     pub samples: usize,
     pub seed: u64,
+    /// `tracked`, `did not track` or `diverged` (docs/track.md), and the sentence that says why.
+    pub verdict: Verdict,
+    pub verdict_reason: String,
+    /// The thresholds judged against (`--max-rmse`, `--max-distance`), m.
+    pub max_rmse: f64,
+    pub max_distance: f64,
+    /// The samples the duration asked for (more than `samples` if the flight was lost) and the
+    /// time it was lost at (null if it was not).
+    pub planned_samples: usize,
+    pub lost_at_s: Option<f64>,
     /// Tracking error of the true position against the trajectory, per axis x, y, z.
     pub axes: BTreeMap<String, AxisMetrics>,
     pub overall: AxisMetrics,
@@ -109,7 +120,8 @@ fn axis_metrics(samples: &[TrackSample]) -> (Vec<AxisMetrics>, AxisMetrics) {
 }
 
 impl TrackReport {
-    /// Build the report of a run; `bounds` = (u_min, u_max).
+    /// Build the report of a run; `bounds` = (u_min, u_max). `flight.samples` must not be empty
+    /// (`fly` always flies the first sample).
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         model: &str,
@@ -118,10 +130,13 @@ impl TrackReport {
         solver: &str,
         seed: u64,
         dt: f64,
-        samples: &[TrackSample],
+        flight: &Flight,
         bounds: &(Vec<f64>, Vec<f64>),
+        rules: &VerdictRules,
     ) -> Self {
+        let samples = &flight.samples[..];
         let (per, all) = axis_metrics(samples);
+        let (verdict, verdict_reason) = judge(flight.lost.as_ref().map(|(t, why)| (why.as_str(), *t)), all.rmse, rules);
         let (_, second) = axis_metrics(&samples[samples.len() / 2..]);
         let mut statuses = BTreeMap::new();
         let mut errors = BTreeMap::new();
@@ -151,6 +166,12 @@ impl TrackReport {
             duration_s: samples.len() as f64 * dt,
             samples: samples.len(),
             seed,
+            verdict,
+            verdict_reason,
+            max_rmse: rules.max_rmse,
+            max_distance: rules.max_distance,
+            planned_samples: flight.planned,
+            lost_at_s: flight.lost.as_ref().map(|(t, _)| *t),
             axes: ["x", "y", "z"].iter().map(|s| s.to_string()).zip(per).collect(),
             overall: all,
             overall_second_half: second,
@@ -171,6 +192,13 @@ impl TrackReport {
             "# Tracking report: {} on {}\n\n- model: `{}`\n- plant: `{}`\n- solver: {}\n- {} samples ({:.1} s), plant seed {}\n\n",
             self.trajectory, self.plant, self.model, self.plant, self.solver, self.samples, self.duration_s, self.seed
         );
+        s += &format!("**Verdict: {}** — {}.\n\n", self.verdict, self.verdict_reason);
+        if self.lost_at_s.is_some() {
+            s += &format!(
+                "The flight stopped there: {} of {} samples flown; the metrics below cover them.\n\n",
+                self.samples, self.planned_samples
+            );
+        }
         s += "Tracking error of the true position against the reference (whole flight, from the start state (3, 3, 5)):\n\n";
         s += "| axis | RMSE (m) | MAE (m) | d₁ |\n|---|---:|---:|---:|\n";
         for (k, m) in &self.axes {
@@ -190,7 +218,7 @@ impl TrackReport {
             self.feedback.median_us, self.feedback.p99_us, self.feedback.max_us, self.prepare.median_us, self.prepare.max_us
         );
         s += &format!(
-            "Statuses: {}. Controller errors: {}. Max QP iterations {}.\n\n",
+            "QP solver statuses (how each sample's QP ended, not whether the loop tracked): {}. Controller errors: {}. Max QP iterations {}.\n\n",
             join_map(&self.statuses),
             if self.controller_errors.is_empty() {
                 "none".into()
