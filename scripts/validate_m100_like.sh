@@ -35,7 +35,7 @@ for variant in plain delay; do
             --name "sindy_$variant" --out "$OUT/sindy_$variant.json" --force
     fi
     for m in pd sindy; do
-        $U evaluate --model "$OUT/${m}_$variant.json" --log "$OUT/test.csv" --json "$OUT/eval_${m}_$variant.json" >/dev/null
+        $U evaluate --model "$OUT/${m}_$variant.json" --log "$OUT/test.csv" --json "$OUT/eval_${m}_$variant.json" --force >/dev/null
         # The default MPC options (MpcOptions::defaults) and the paper's (examples/mpc_paper.json).
         track --model "$OUT/${m}_$variant.json" --plant $PLANT --trajectory sinusoid,circle,spiral \
             --duration 30 --out "$OUT/track_${m}_${variant}_default" --force --work-dir "$OUT/work"

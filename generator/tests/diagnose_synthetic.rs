@@ -433,3 +433,53 @@ fn a_corrected_model_that_flies_worse_is_not_presented_as_the_fix() {
         }
     }
 }
+
+/// The aircraft's roll and pitch loops are slower than the model's (their own part × 0.45) and
+/// have none of its couplings: the truth is the model file with a `loop_mismatch` block, flown by
+/// its own IR. The verdict names `loop_mismatch` first, with the gains within 0.1 and the
+/// couplings within 0.25 of the truth, and the step response of the corrected model's roll is
+/// slower than the base model's.
+#[test]
+fn loop_mismatch() {
+    use uavgen::model::corrections::LoopMismatch;
+    let (m, text) = model();
+    let mut c = uavgen::model::Corrections::default();
+    for loop_ in ["roll_rate", "pitch_rate"] {
+        c.loop_mismatch.insert(
+            loop_.to_string(),
+            LoopMismatch {
+                gain: 0.45,
+                coupling: 0.0,
+            },
+        );
+    }
+    let truth_text = uavgen::model::attach_corrections(&text, "truth.json", &c).unwrap();
+    let truth = uavgen::model::parse(&truth_text, "truth.json").unwrap();
+    let ir = ModelIr::new(&truth);
+    let tr = Truth::default();
+    let train = parse_log(&fly(&ir, &tr, 120.0, 41), "train.csv").unwrap();
+    let test = parse_log(&fly(&ir, &tr, 60.0, 1041), "test.csv").unwrap();
+    let options = DiagnoseOptions {
+        model_text: Some(text),
+        where_analysis: false,
+        ..DiagnoseOptions::default()
+    };
+    let d = diagnose(&m, &[train], &[test], &options).unwrap();
+    eprintln!("verdict {:?}; corrections {:?}", d.verdict, d.corrections);
+    assert_eq!(
+        d.verdict.first().map(String::as_str),
+        Some("loop_mismatch"),
+        "{:?}",
+        d.verdict
+    );
+    for loop_ in ["roll_rate", "pitch_rate"] {
+        let fitted = d.corrections.loop_mismatch.get(loop_).expect("the loop is named");
+        assert!((fitted.gain - 0.45).abs() < 0.1, "{loop_}: gain {}", fitted.gain);
+        assert!(fitted.coupling.abs() < 0.25, "{loop_}: coupling {}", fitted.coupling);
+    }
+    let roll = d.response_times.iter().find(|t| t.input == "u_roll").unwrap();
+    assert!(roll.corrected.t63.unwrap() > roll.base.t63.unwrap(), "{roll:?}");
+    assert!(
+        d.shrink.after.horizon.as_ref().unwrap().overall_rmse < d.shrink.before.horizon.as_ref().unwrap().overall_rmse
+    );
+}

@@ -21,6 +21,9 @@ pub struct EvaluateArgs {
     /// Also write the full evaluation as JSON.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Overwrite --json if it exists (as identify, simulate and track do).
+    #[arg(long)]
+    force: bool,
     /// Write measured-vs-predicted plots (SVG) into this directory.
     #[arg(long)]
     plots: Option<PathBuf>,
@@ -31,6 +34,9 @@ pub struct EvaluateArgs {
 }
 
 pub fn run(args: EvaluateArgs) -> Result<(), String> {
+    if let Some(path) = args.json.as_ref().filter(|p| p.exists() && !args.force) {
+        return Err(format!("{}: exists; pass --force to overwrite it", path.display()));
+    }
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
     let mut logs = Vec::new();
     for path in &args.logs {

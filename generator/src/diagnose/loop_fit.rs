@@ -21,6 +21,23 @@ use super::residuals::{filter, Base};
 use super::score::{taus, Rules};
 use super::select::{Current, Problem, State};
 
+/// A loop is a mismatch only when it differs materially from the base model's: its bandwidth
+/// ratio √gain outside [1/[`MATERIAL_BANDWIDTH`], [`MATERIAL_BANDWIDTH`]] or its coupling changed by
+/// more than [`MATERIAL_COUPLING`]. Below that the fit measures the base model's own identification
+/// error, not the aircraft: a SINDy model diagnosed against fresh flights of the very plant it was
+/// identified on fits gains of 1.13–1.25 (bandwidth ratio 1.06–1.12) and couplings of 1.20–1.23,
+/// significantly (z 6–15) — the attenuation of a least-squares fit on noisy regressors — while the
+/// real M100 against a simulator's model gives bandwidth ratios 0.66–0.74 and couplings 0.13–0.26.
+pub const MATERIAL_BANDWIDTH: f64 = 1.25;
+/// See [`MATERIAL_BANDWIDTH`].
+pub const MATERIAL_COUPLING: f64 = 0.5;
+
+/// Whether a loop with these parameters differs materially from the base model's.
+pub fn material(gain: f64, coupling: f64) -> bool {
+    let b = super::catalogue::loops::bandwidth_ratio(gain);
+    !(1.0 / MATERIAL_BANDWIDTH..=MATERIAL_BANDWIDTH).contains(&b) || (coupling - 1.0).abs() > MATERIAL_COUPLING
+}
+
 /// A fitted loop, for the report.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct LoopFit {
@@ -172,6 +189,15 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
             Some(format!("z = {z:.2} is not above {}", rules.min_z))
         } else if gain <= 0.0 {
             Some(format!("gain {gain:.3} is not positive"))
+        } else if !material(gain, 1.0 + theta[1]) {
+            Some(format!(
+                "within the base model's own identification error (bandwidth ratio {:.2}, coupling {:.2}; \
+                 a mismatch needs a bandwidth ratio outside {:.2}–{MATERIAL_BANDWIDTH} or a coupling changed by more \
+                 than {MATERIAL_COUPLING})",
+                super::catalogue::loops::bandwidth_ratio(gain),
+                1.0 + theta[1],
+                1.0 / MATERIAL_BANDWIDTH
+            ))
         } else {
             None
         };
@@ -187,6 +213,7 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
         });
     }
     let kept: Vec<usize> = (0..NLOOPS).filter(|&l| fits[l].kept).collect();
+    let none_kept = kept.is_empty();
     // Without a kept loop, the strongest is scored alone (and reported, not named).
     let used: Vec<usize> = if kept.is_empty() {
         (0..NLOOPS)
@@ -212,7 +239,7 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
         });
     }
     let z = used.iter().map(|&l| fits[l].z).fold(0.0, f64::max);
-    let invalid = used
+    let mut invalid: Vec<String> = used
         .iter()
         .filter(|&&l| fits[l].gain <= 0.0)
         .map(|&l| {
@@ -223,6 +250,16 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
             )
         })
         .collect();
+    if none_kept {
+        for &l in &used {
+            if let Some(why) = &fits[l].not_kept {
+                invalid.push(format!(
+                    "no loop is kept; the strongest, {}: {why}",
+                    super::catalogue::loops::name(l)
+                ));
+            }
+        }
+    }
     let after_state = State {
         transform,
         ..state.clone()

@@ -514,14 +514,14 @@ fn run(
         total: 0,
         what: "shrink: free runs before and after",
     });
-    let (before, after) = shrink::pools(&problem, &state, |s, destaled| Some(&data.variant(destaled)[s]));
+    let (before, after) = shrink::pools(&problem, &state, false, |s, destaled| Some(&data.variant(destaled)[s]));
     // The same on the noise-free copies of the held-out logs (same stretches, same parameters).
     let reference = if reference.is_empty() {
         None
     } else {
         let refdata = data::prepare(&base, &options.savgol, options.residual, &[], reference, 1)?;
         let key = |s: &data::SegData| (s.log, s.segment, s.part);
-        let (before, after) = shrink::pools(&problem, &state, |s, destaled| {
+        let (before, after) = shrink::pools(&problem, &state, true, |s, destaled| {
             let r = refdata.raw.iter().position(|d| key(d) == key(&data.raw[s]))?;
             Some(&refdata.variant(destaled)[r])
         });

@@ -66,9 +66,12 @@ impl ChannelTime {
 
 /// The step response of input j under `aug`.
 fn respond(aug: &Augmented, j: usize, dt: f64, substeps: usize) -> Response {
-    let n = (SETTLE / dt).ceil() as usize + 1;
+    // The step comes after `pre` samples at rest, so that a delay delays it (the delayed input
+    // holds its first value before the log starts).
+    let pre = 1 + (aug.transform.delay[j] / dt).ceil() as usize;
+    let n = pre + (SETTLE / dt).ceil() as usize + 1;
     let run = |delta: f64| -> Vec<f64> {
-        let col = vec![delta; n];
+        let col: Vec<f64> = (0..n).map(|m| if m >= pre { delta } else { 0.0 }).collect();
         let v = delayed(&col, dt, aug.transform.delay[j]);
         let mut x = [0.0; 12];
         x[2] = 5.0;
@@ -93,7 +96,7 @@ fn respond(aug: &Augmented, j: usize, dt: f64, substeps: usize) -> Response {
         out
     };
     let (with, without) = (run(STEP[j]), run(0.0));
-    let y: Vec<f64> = with.iter().zip(&without).map(|(a, b)| a - b).collect();
+    let y: Vec<f64> = with.iter().zip(&without).skip(pre).map(|(a, b)| a - b).collect();
     let last = y.last().copied().unwrap_or(0.0);
     let gain = last / STEP[j];
     let level = 0.632 * last.abs();
@@ -132,4 +135,48 @@ pub(crate) fn compare(p: &Problem, state: &State) -> Vec<ChannelTime> {
             corrected: respond(&corrected, j, dt, corrected.substeps(dt, base_substeps)),
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::catalogue::inputs::InputTransform;
+    use crate::diagnose::catalogue::linear::Context;
+    use crate::diagnose::residuals::Base;
+    use crate::model::parse;
+
+    /// A first-order yaw-rate loop ṙ = (u − r)/0.2 has t63 = 0.2 s and gain 1; with a delay of
+    /// 0.1 s and an input gain of 1.5, t63 = 0.3 s and gain 1.5 (to the sample interpolation).
+    #[test]
+    fn first_order_plus_delay() {
+        let text = r#"{"format": "uavgen-model/1", "kind": "sindy", "name": "t",
+            "library": ["yaw_rate", "u_yaw_rate"],
+            "kinematic": [["x","vx"],["y","vy"],["z","vz"],["roll","roll_rate"],["pitch","pitch_rate"],["yaw","yaw_rate"]],
+            "coefficients": [
+              {"state": "yaw_rate", "term": "yaw_rate", "coefficient": -5},
+              {"state": "yaw_rate", "term": "u_yaw_rate", "coefficient": 5}]}"#;
+        let model = parse(text, "t.json").unwrap();
+        let base = Base::new(&model, Some(4), None);
+        let ctx = Context {
+            gravity: 9.81,
+            rotor_radius: 0.2,
+        };
+        let dt = 1.0 / 30.0;
+        let plain = Augmented::plain(&base, ctx);
+        let r = respond(&plain, 3, dt, 4);
+        assert!((r.t63.unwrap() - 0.2).abs() < 2e-3, "{r:?}");
+        assert!((r.gain - 1.0).abs() < 1e-6, "{r:?}");
+        let mut transform = InputTransform::default();
+        transform.delay[3] = 0.1;
+        transform.gain[3] = Some(1.5);
+        let slow = Augmented {
+            base: &base,
+            ctx,
+            linear: Vec::new(),
+            transform,
+        };
+        let r = respond(&slow, 3, dt, 4);
+        assert!((r.t63.unwrap() - 0.3).abs() < 2e-3, "{r:?}");
+        assert!((r.gain - 1.5).abs() < 1e-6, "{r:?}");
+    }
 }

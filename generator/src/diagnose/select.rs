@@ -461,6 +461,18 @@ pub(crate) fn select(
                 best = Some(lag.clone());
             }
         }
+        // channel_response fits a delay, a lag and a gain per channel: it is named over a
+        // significant latency or actuator_lag only when its score is clearly better (the simpler
+        // effect explains as much otherwise).
+        if let Some(b) = best.as_ref().filter(|b| b.kind == EffectKind::ChannelResponse) {
+            let simpler = candidates
+                .iter()
+                .filter(|c| matches!(c.kind, EffectKind::Latency | EffectKind::ActuatorLag) && c.significant)
+                .min_by(|a, b| a.delta_bic_test.total_cmp(&b.delta_bic_test));
+            if let Some(s) = simpler.filter(|s| b.delta_bic_test > DELAY_MARGIN * s.delta_bic_test) {
+                best = Some(s.clone());
+            }
+        }
         let full = state.named.len() + 1 >= rules.max_effects + data_effects;
         rounds.push(Round {
             candidates,

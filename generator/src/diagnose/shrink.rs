@@ -85,18 +85,26 @@ pub(crate) fn wrapped(p: &[f64; 12], o: &[f64; 12]) -> [f64; 12] {
     p
 }
 
-/// The base model and the model `state` describes, both on `seg(s, state.destale)` (the data under
-/// the stale policy, as `uavgen evaluate` computes them),
-/// pooled over the test segments s of every test fit, with that fit's parameters; `seg` gives the
-/// data of segment s, raw or with stale rows interpolated (None: left out).
-pub(crate) fn pools<'d>(p: &Problem, state: &State, seg: impl Fn(usize, bool) -> Option<&'d SegData>) -> (Pool, Pool) {
+/// The base model and the model `state` describes, pooled over the test segments s of every test
+/// fit, with that fit's parameters; `seg(s, destaled)` gives the data of segment s, raw or with
+/// stale rows interpolated (None: left out). The model with the effects runs on the data under the
+/// stale policy (`state.destale`); the base model on the same data (`before_raw` false: the figures
+/// `uavgen evaluate` reproduces), or on the raw data (`before_raw` true: the self-check's gap,
+/// which the stale rows opened, on the noise-free copies).
+pub(crate) fn pools<'d>(
+    p: &Problem,
+    state: &State,
+    before_raw: bool,
+    seg: impl Fn(usize, bool) -> Option<&'d SegData>,
+) -> (Pool, Pool) {
     let plain = Augmented::plain(p.base, p.ctx);
     let (mut before, mut after) = (Pool::default(), Pool::default());
     for i in p.test_fits() {
         let aug = p.augmented(state, i);
         for &s in &p.fits[i].test {
-            if let Some(variant) = seg(s, state.destale) {
-                before.add(&plain, variant, p.options.horizon);
+            let base_variant = state.destale && !before_raw;
+            if let (Some(raw), Some(variant)) = (seg(s, base_variant), seg(s, state.destale)) {
+                before.add(&plain, raw, p.options.horizon);
                 after.add(&aug, variant, p.options.horizon);
             }
         }
