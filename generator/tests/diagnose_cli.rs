@@ -127,7 +127,7 @@ fn diagnose_writes_the_report_and_a_loadable_corrected_model() {
     }
     assert_eq!(report["verdict"], serde_json::json!(["linear_drag"]));
     let effects = report["effects"].as_array().unwrap();
-    assert_eq!(effects.len(), 9, "every catalogued effect is reported");
+    assert_eq!(effects.len(), 11, "every catalogued effect is reported");
     for e in effects {
         for key in [
             "name",
