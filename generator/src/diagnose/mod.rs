@@ -21,6 +21,7 @@
 //! d.write("diagnosis".as_ref(), false).unwrap();
 //! ```
 
+mod assemble;
 mod augmented;
 mod candidate;
 pub mod catalogue;
@@ -384,6 +385,46 @@ pub fn base_side(model: &Model, logs: &[FlightLog], options: &DiagnoseOptions) -
     Ok(pool.side())
 }
 
+/// `[j][c]`: dynamic row c of the base model depends on input j (structurally, from the IR).
+fn input_rows(base: &residuals::Base) -> [[bool; 6]; 4] {
+    let mut out = [[false; 6]; 4];
+    for j in 0..4 {
+        for c in 0..6 {
+            out[j][c] = !base.ir.graph.is_zero(base.ir.fu[6 + c][j]);
+        }
+    }
+    out
+}
+
+/// Per channel, the smallest mean squared residual taken as real (see `Problem::floor`).
+fn floor(data: &data::Prepared) -> [f64; 6] {
+    let mut floor = [0.0; 6];
+    let count: usize = data.raw.iter().map(|s| s.dx.len()).sum();
+    for seg in &data.raw {
+        for d in &seg.dx {
+            for c in 0..6 {
+                floor[c] += d[c] * d[c] / count.max(1) as f64;
+            }
+        }
+    }
+    floor.map(|ms| 1e-16 * ms)
+}
+
+/// The delays the cross-correlation finds (command → driven state, prewhitened, significant and
+/// localised): grid points of channel_response's scan.
+fn seeds(where_report: Option<&WhereReport>) -> [Option<f64>; 4] {
+    let mut seeds = [None; 4];
+    if let Some(w) = where_report {
+        for (j, lag) in w.response_lags.iter().enumerate().take(4) {
+            let x = &lag.xcorr;
+            if x.significant && x.localised && x.peak_seconds > 0.0 {
+                seeds[j] = Some(x.peak_seconds);
+            }
+        }
+    }
+    seeds
+}
+
 fn run(
     model: &Model,
     train: &[FlightLog],
@@ -431,22 +472,7 @@ fn run(
             rows,
         });
     }
-    let mut input_rows = [[false; 6]; 4];
-    for j in 0..4 {
-        for c in 0..6 {
-            input_rows[j][c] = !base.ir.graph.is_zero(base.ir.fu[6 + c][j]);
-        }
-    }
-    let mut floor = [0.0; 6];
-    let count: usize = data.raw.iter().map(|s| s.dx.len()).sum();
-    for seg in &data.raw {
-        for d in &seg.dx {
-            for c in 0..6 {
-                floor[c] += d[c] * d[c] / count.max(1) as f64;
-            }
-        }
-    }
-    let floor = floor.map(|ms| 1e-16 * ms);
+    let (input_rows, floor) = (input_rows(&base), floor(&data));
     // Held-out samples outside the training envelope are not scored (all are in cross-validation).
     let (mask, inside) = if cv {
         (data.raw.iter().map(|s| s.airborne.clone()).collect(), 1.0)
@@ -467,17 +493,7 @@ fn run(
         .as_ref()
         .map(|input| where_link::where_report(input, options.horizon));
 
-    // The delays the cross-correlation finds (command → driven state, prewhitened, significant and
-    // localised) seed channel_response's scan.
-    let mut seeds = [None; 4];
-    if let Some(w) = &where_report {
-        for (j, lag) in w.response_lags.iter().enumerate().take(4) {
-            let x = &lag.xcorr;
-            if x.significant && x.localised && x.peak_seconds > 0.0 {
-                seeds[j] = Some(x.peak_seconds);
-            }
-        }
-    }
+    let seeds = seeds(where_report.as_ref());
     let problem = select::Problem {
         base: &base,
         data: &data,
@@ -558,107 +574,9 @@ fn run(
         },
     );
 
-    // The effects: named ones with their round's figures, the others from the last round.
-    // Named effects report the final parameters (after the backfitting of later rounds).
-    let mut effects = Vec::new();
-    for (r, round) in rounds.iter().enumerate() {
-        if let Some(named) = round.named {
-            let c = round
-                .candidates
-                .iter()
-                .find(|c| c.kind == named)
-                .expect("named candidate");
-            let mut e = report_json::effect_report(c, r + 1, true, options.rotor_radius);
-            if let Some((_, v)) = linear.iter().find(|(k, _)| *k == named) {
-                e.parameters = report_json::linear_value(named, v, Some(options.rotor_radius));
-            }
-            let inputs: Vec<(usize, f64)> = (0..catalogue::inputs::LAG_CHANNELS)
-                .filter_map(|j| match named {
-                    EffectKind::Latency if j < 4 => {
-                        (state.transform.delay[j] > 0.0).then_some((j, state.transform.delay[j]))
-                    }
-                    EffectKind::ActuatorLag => state.transform.lag_of(j).map(|t| (j, t)),
-                    _ => None,
-                })
-                .collect();
-            if !inputs.is_empty() {
-                e.parameters = report_json::input_value(&inputs);
-            }
-            effects.push(e);
-        }
-    }
-    if let Some(last) = rounds.last() {
-        let mut rest: Vec<_> = last
-            .candidates
-            .iter()
-            .filter(|c| !state.named.contains(&c.kind))
-            .collect();
-        rest.sort_by(|a, b| a.delta_bic_test.total_cmp(&b.delta_bic_test));
-        let r = rounds.len();
-        effects.extend(
-            rest.into_iter()
-                .map(|c| report_json::effect_report(c, r, false, options.rotor_radius)),
-        );
-    }
-    let rounds_report = rounds
-        .iter()
-        .enumerate()
-        .map(|(r, round)| {
-            let mut candidates: Vec<RoundEntry> = round
-                .candidates
-                .iter()
-                .map(|c| RoundEntry {
-                    name: c.kind.name().to_string(),
-                    score: c.delta_bic_test,
-                    heldout_reduction: c.reduction,
-                    z: c.z,
-                    significant: c.significant,
-                })
-                .collect();
-            candidates.sort_by(|a, b| a.score.total_cmp(&b.score));
-            RoundReport {
-                round: r + 1,
-                named: round.named.map(|k| k.name().to_string()),
-                candidates,
-            }
-        })
-        .collect();
-    // The ground effect reaches 1 % of the thrust at z = (R/4)√99 ≈ 2.5 R: below that only.
-    if options.candidates.contains(&EffectKind::GroundEffect) {
-        let lowest = data
-            .raw
-            .iter()
-            .filter(|s| !s.holdout)
-            .flat_map(|s| {
-                s.interior()
-                    .filter(|&k| s.airborne[k - s.h])
-                    .map(move |k| s.x[k][2].abs())
-            })
-            .fold(f64::INFINITY, f64::min);
-        let one_percent = options.rotor_radius / 4.0 * 99f64.sqrt();
-        if lowest > one_percent {
-            notes.push(format!(
-                "the training logs never fly below z = {lowest:.2} m; the ground effect reaches 1 % of the thrust \
-                 only below {one_percent:.2} m (rotor radius {} m), so ground_effect can hardly be detected in them",
-                options.rotor_radius
-            ));
-        }
-    }
-    if state.named.contains(&EffectKind::StaleSamples) {
-        notes.push(
-            "stale_samples is about the data, not the model: corrected.json has no entry for it; treat repeated \
-             rows as missing (interpolate them) before identifying or evaluating a model on these logs"
-                .to_string(),
-        );
-    }
-    if state.named.contains(&EffectKind::Latency) {
-        notes.push(
-            "latency is written as input delays (corrections.latency): the runtime compensates them, they are not \
-             part of f"
-                .to_string(),
-        );
-    }
-
+    let effects = assemble::effects(&rounds, &state, &linear, options.rotor_radius);
+    let rounds_report = assemble::rounds(&rounds);
+    notes.extend(assemble::notes(&data, &state, options));
     // corrected.json (null when the model text is not at hand: see `Diagnosis::corrected_from`).
     let text = options
         .model_text

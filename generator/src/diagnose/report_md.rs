@@ -196,6 +196,17 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
     }
     let _ = writeln!(s);
 
+    let _ = writeln!(
+        s,
+        "## How the command channels answer\n\nStep responses from rest, the corrected model (every named effect) against \
+         the base model: time to 63 % of the settled value (d + τ for a delayed first-order response) and the settled \
+         value over the step.\n"
+    );
+    for t in &d.response_times {
+        let _ = writeln!(s, "- {}", t.sentence());
+    }
+    let _ = writeln!(s);
+
     let sh = &d.shrink;
     let _ = writeln!(s, "## How far the gap shrinks ({})\n", sh.data);
     let with = if sh.effects.is_empty() {

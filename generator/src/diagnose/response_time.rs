@@ -78,9 +78,7 @@ fn respond(aug: &Augmented, j: usize, dt: f64, substeps: usize) -> Response {
         let u0 = [0.0; 4];
         let b = aug.transform.model_f(aug.base, &x, &u0);
         let mut s: Lags = [0.0; 10];
-        for c in 0..6 {
-            s[4 + c] = b[6 + c];
-        }
+        s[4..10].copy_from_slice(&b[6..12]);
         let mut out = Vec::with_capacity(n);
         for (m, vm) in v.iter().enumerate() {
             out.push(x[OUTPUT[j]]);
