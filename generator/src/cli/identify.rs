@@ -2,7 +2,7 @@
 
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use uavgen::identify::bounded_selection::{select_bounded_relaxed, select_bounded_with};
+use uavgen::identify::bounded_selection::select_bounded_with;
 use uavgen::identify::dataset::{build, DatasetOptions};
 use uavgen::identify::horizon_check::{self, HorizonCheck};
 use uavgen::identify::pd::{self, PdFitOptions};
@@ -393,52 +393,6 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
                 if let Some(sel) = select_bounded_corrected(&mut fit, &check, &with) {
                     for (row, from, to) in &sel.moves {
                         eprintln!("  horizon check: {row} moved from sparsity {from} to {to}");
-                    }
-                    if !sel.report.passed() {
-                        // No single-row move reduces the failures: keep moving rows to sparser
-                        // values by the fewest failures, even through worse selections.
-                        let check_fn = |f: &sindy::SindyFit| {
-                            let text = with(f).ok()?;
-                            let model = uavgen::model::parse(&text, "identified model").ok()?;
-                            horizon_check::check(&model, &check)
-                        };
-                        let start = fit.chosen.clone();
-                        let relaxed = select_bounded_relaxed(&mut fit, &check_fn);
-                        if relaxed.as_ref().is_some_and(|s| s.report.passed()) {
-                            for (row, from, to) in relaxed.iter().flat_map(|s| &s.moves) {
-                                eprintln!("  horizon check (relaxed): {row} moved from sparsity {from} to {to}");
-                            }
-                        } else {
-                            // Last resort: one sparsity value for every row, the passing one with
-                            // the least total criterion.
-                            fit.choose(&start);
-                            let mut best: Option<(f64, usize)> = None;
-                            for v in 0..fit.sweep.len() {
-                                let all = vec![v; fit.chosen.len()];
-                                if fit.sweep[v].rows.iter().any(|r| r.terms == 0) {
-                                    continue;
-                                }
-                                fit.choose(&all);
-                                let passed = check_fn(&fit).is_some_and(|r| r.passed());
-                                let score = match options.criterion {
-                                    Criterion::Aic => fit.sweep[v].total_aic,
-                                    Criterion::Bic => fit.sweep[v].total_bic,
-                                };
-                                if passed && best.is_none_or(|b| score < b.0) {
-                                    best = Some((score, v));
-                                }
-                            }
-                            match best {
-                                Some((_, v)) => {
-                                    fit.choose(&vec![v; fit.chosen.len()]);
-                                    eprintln!(
-                                        "  horizon check: no per-row selection passes; every row at sparsity {} (the passing one with the least total criterion)",
-                                        fit.sweep[v].value
-                                    );
-                                }
-                                None => fit.choose(&start),
-                            }
-                        }
                     }
                 }
             }

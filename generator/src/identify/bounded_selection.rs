@@ -43,16 +43,6 @@ pub fn select_bounded_with(
     search(fit, run_check, false)
 }
 
-/// [`select_bounded_with`], but the best move is made even when it leaves more trials unbounded
-/// than before (the search escapes a selection that no single move improves; every move still
-/// removes terms, so it ends). `uavgen identify` runs it after [`select_bounded_with`] fails.
-pub fn select_bounded_relaxed(
-    fit: &mut SindyFit,
-    run_check: &dyn Fn(&SindyFit) -> Option<HorizonReport>,
-) -> Option<BoundedSelection> {
-    search(fit, run_check, true)
-}
-
 fn search(
     fit: &mut SindyFit,
     run_check: &dyn Fn(&SindyFit) -> Option<HorizonReport>,

@@ -803,4 +803,104 @@ mod tests {
         assert_eq!(r[2], [1.5; 4]);
         assert_eq!(InputResponse::default().interval_inputs(&u, 0.1), u);
     }
+
+    /// A vehicle of first- and second-order loops, simulated finely with zero-order-hold commands
+    /// delayed by `delay` per channel, logged at 30 Hz, differentiated like the dataset does.
+    fn synthetic(delay: [f64; 4], seconds: f64, seed: u64) -> ScanSegment {
+        use crate::identify::preprocess::{columnwise, SavGol};
+        use rand::{Rng, SeedableRng};
+        let dt = 1.0 / 30.0;
+        let n = (seconds / dt) as usize;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        // Random steps held 0.2–1 s.
+        let mut u = vec![[0.0; 4]; n];
+        let mut hold = [0usize; 4];
+        let mut cur = [0.0; 4];
+        let bounds = [2.0, 0.3, 0.3, 1.0];
+        for row in u.iter_mut() {
+            for j in 0..4 {
+                if hold[j] == 0 {
+                    cur[j] = rng.gen_range(-bounds[j]..=bounds[j]);
+                    hold[j] = rng.gen_range(6..30);
+                }
+                hold[j] -= 1;
+                row[j] = cur[j];
+            }
+        }
+        let sub = 40;
+        let h = dt / sub as f64;
+        let mut x = [0.0f64; 12];
+        let mut xs = Vec::with_capacity(n);
+        for k in 0..n {
+            xs.push(x);
+            for i in 0..sub {
+                let t = k as f64 * dt + (i as f64 + 0.5) * h;
+                let uu: [f64; 4] = std::array::from_fn(|j| {
+                    let m = ((t - delay[j]) / dt).floor();
+                    if m < 0.0 {
+                        0.0
+                    } else {
+                        u[m as usize][j]
+                    }
+                });
+                let mut d = [0.0; 12];
+                d[8] = -3.0 * (x[8] - uu[0]);
+                d[9] = -100.0 * (x[3] - uu[1]) - 16.0 * x[9];
+                d[10] = -100.0 * (x[4] - uu[2]) - 16.0 * x[10];
+                d[11] = -4.0 * (x[11] - uu[3]);
+                for s in 0..6 {
+                    d[s] = x[s + 6];
+                }
+                d[6] = 9.81 * x[4];
+                d[7] = -9.81 * x[3];
+                for s in 0..12 {
+                    x[s] += h * d[s];
+                }
+            }
+        }
+        let sg = SavGol::new(9, 3).unwrap();
+        let dx = columnwise(&xs, |y| sg.derivative(y, dt));
+        ScanSegment {
+            log: 0,
+            dt,
+            h: 4,
+            x: xs,
+            u,
+            dx,
+        }
+    }
+
+    #[test]
+    fn a_known_delay_on_one_channel_is_found_within_a_quarter_sample() {
+        let dt = 1.0 / 30.0;
+        let truth = [0.1, 0.0, 0.0, 0.0];
+        let est = estimate(&[synthetic(truth, 60.0, 7)], &ScanOptions::default()).unwrap();
+        let c = &est.channels;
+        assert_eq!(c.len(), 4);
+        assert!(
+            (c[0].delay + c[0].lag.unwrap_or(0.0) - 0.1).abs() <= 0.25 * dt + 1e-9,
+            "{}",
+            c[0].line()
+        );
+        assert!(c[0].delay_range.0 <= c[0].delay && c[0].delay <= c[0].delay_range.1);
+        for ch in &c[1..] {
+            assert!(ch.delay <= 0.25 * dt + 1e-9, "{}", ch.line());
+        }
+        // Delaying a second channel moves that one only.
+        let est = estimate(&[synthetic([0.1, 0.0, 0.0, 0.2], 60.0, 8)], &ScanOptions::default()).unwrap();
+        let y = &est.channels[3];
+        assert!(
+            (y.delay + y.lag.unwrap_or(0.0) - 0.2).abs() <= 0.25 * dt + 1e-9,
+            "{}",
+            y.line()
+        );
+        assert!(est.channels[1].delay <= 0.25 * dt + 1e-9, "{}", est.channels[1].line());
+    }
+
+    #[test]
+    fn too_little_data_is_an_error_not_a_panic() {
+        let seg = synthetic([0.0; 4], 2.0, 1);
+        let e = estimate(&[seg], &ScanOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("too little data"), "{e}");
+    }
 }
