@@ -696,7 +696,7 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
                     }
                     let d = k * step;
                     let v = score(d, Some(tau));
-                    if lag_best.is_none_or(|b| v < b.2) {
+                    if lag_best.map_or(true, |b| v < b.2) {
                         lag_best = Some((d, tau, v));
                     }
                 }
@@ -704,7 +704,7 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
             let h_none = sc.horizon_rmse(&with_channel(&cur, j, 0.0, None), j);
             let mut h_delay = sc.horizon_rmse(&with_channel(&cur, j, delay, None), j);
             // Guard: a delay that makes the loop's held-out free runs worse is not kept.
-            if delay > 0.0 && !(h_delay <= (1.0 + options.lag_gain) * h_none) {
+            if delay > 0.0 && h_delay > (1.0 + options.lag_gain) * h_none {
                 note = Some(format!(
                     "delay {delay:.3} s left out: loop free runs {h_delay:.4} against {h_none:.4} without it"
                 ));
@@ -848,9 +848,7 @@ mod tests {
                 d[9] = -100.0 * (x[3] - uu[1]) - 16.0 * x[9];
                 d[10] = -100.0 * (x[4] - uu[2]) - 16.0 * x[10];
                 d[11] = -4.0 * (x[11] - uu[3]);
-                for s in 0..6 {
-                    d[s] = x[s + 6];
-                }
+                d[..6].copy_from_slice(&x[6..12]);
                 d[6] = 9.81 * x[4];
                 d[7] = -9.81 * x[3];
                 for s in 0..12 {
