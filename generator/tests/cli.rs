@@ -766,3 +766,30 @@ fn identify_defaults_on_the_m100_logs() {
         "{err}"
     );
 }
+
+/// The same for SINDy: the default identification of runs 1–5 is to write a model that passes its
+/// horizon check. It does not yet (135 of 257 trials unbounded; docs/identification.md, "Horizon
+/// check with defaults"): run with `--ignored` to see where it stands.
+#[test]
+#[ignore = "known gap: the default SINDy identification of the M100 runs 1-5 fails its horizon check (docs/identification.md)"]
+fn identify_sindy_defaults_on_the_m100_logs() {
+    let m = repo().join("../shared/flights/m100");
+    if !m.join("m100_run1.csv").exists() {
+        eprintln!("SKIPPED: {} is absent", m.display());
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("sindy.json");
+    let mut args = vec!["identify".to_string(), "--method".into(), "sindy".into()];
+    for r in 1..=5 {
+        args.extend([
+            "--log".to_string(),
+            m.join(format!("m100_run{r}.csv")).display().to_string(),
+        ]);
+    }
+    args.extend(["--out".to_string(), out.display().to_string()]);
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = uavgen(&refs);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("stayed bounded"), "{}", stderr(&o));
+}
