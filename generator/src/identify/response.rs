@@ -16,19 +16,22 @@
 //! "n samples".
 //!
 //! **The estimate** ([`estimate`]), per channel j and the row it drives (u_vz → vz, u_roll →
-//! roll_rate, u_pitch → pitch_rate, u_yaw_rate → yaw_rate): a scan over delays 0 … `max_delay`
-//! in quarter samples, each without a lag and with every lag of a log-spaced grid up to
-//! `max_lag`. Every candidate refits the row — a linear loop model in 1, the eight invariant
-//! states and the four (transformed) inputs — on all but one fold of the data and scores the
-//! one-step squared error on the held-out fold (folds: the logs when there are 3 or more, else 5
-//! contiguous blocks of every segment). Coordinate-wise over the channels, the others at their
-//! current estimate, with a second pass. The candidate with the least held-out error is taken
-//! when its evidence against "no delay, no lag" is at least `min_evidence` (N_eff ln(SSE₀/SSE),
-//! N_eff the effective sample count of the row's residual); a lag is kept only when it also makes
-//! the held-out free runs of the channel's loop (the row and its angle over one MPC horizon, the
-//! other states from the log) at least `lag_gain` better than the best delay without a lag.
-//! Uncertainty: the range of candidates whose held-out error is within Δχ² = 1 of the best,
-//! N_eff ln(SSE/SSE_min) ≤ 1.
+//! roll_rate, u_pitch → pitch_rate, u_yaw_rate → yaw_rate), coordinate-wise over the channels (the
+//! others at their current estimate) with a second pass; held-out folds are the logs when there are
+//! 3 or more, else 5 contiguous blocks of every segment:
+//!
+//! 1. *Delay*: 0 … `max_delay` in steps of `delay_step` samples. Every candidate refits the row on
+//!    the whole physics library (least squares) on all folds but one and scores the one-step squared
+//!    error on the held-out fold. The least held-out error wins when its evidence over no delay,
+//!    N_eff ln(SSE₀/SSE), is at least `min_evidence` (N_eff: the effective sample count of the
+//!    row's residual); ±1σ: the delays with N_eff ln(SSE/SSE_min) ≤ 1.
+//! 2. *Guard*: the channel's loop — the row (with its angle for roll and pitch) as a linear model in
+//!    1, the eight invariant states and the four inputs, refitted per fold — runs freely over one
+//!    MPC horizon on the held-out folds, the other states from the log. A delay that makes these
+//!    free runs more than `lag_gain` worse than no delay is not kept.
+//! 3. *Lag*: every τ of `lags`, with the delay shortened by about τ (±1 step); kept only when its
+//!    one-step evidence over the delay alone is ≥ `min_evidence` and the loop's held-out free runs
+//!    improve by ≥ `lag_gain` (and the delay did not make them worse: the loop model is trusted).
 
 use super::sindy::{eval_term, Library, LibraryKind};
 use crate::model::{DEFAULT_INPUTS, DEFAULT_STATES};
@@ -142,7 +145,7 @@ pub struct ScanOptions {
     pub max_delay: f64,
     /// Delay step in samples.
     pub delay_step: f64,
-    /// Lag time constants scanned, s (besides no lag).
+    /// Lag time constants scanned, s.
     pub lags: Vec<f64>,
     /// Folds when there are fewer than 3 logs (contiguous blocks of every segment).
     pub blocks: usize,
