@@ -13,9 +13,13 @@ cargo build --release -q -p uavgen
 uavgen=target/release/uavgen
 TRAIN=()
 for r in 1 2 3 4 5; do TRAIN+=(--log "$M/m100_run$r.csv"); done
+# The shipped models are identified from the logs as recorded, without delays (--input-delay none
+# --stale keep): with identify's defaults (delays estimated, stale rows interpolated) the SINDy
+# model of runs 1-5 fails its horizon check (docs/identification.md, "Delay-aware identification").
 # SINDy: physics library, STLSQ, per-row BIC (effective sample count) over this sweep, then
 # rows moved to sparser values until one MPC horizon stays bounded.
 $uavgen identify --method sindy "${TRAIN[@]}" --sweep --sweep-values 16,20,24,32,40,48,64 \
-    --criterion bic --name sindy_m100 --out models/sindy_m100.json --force
+    --criterion bic --input-delay none --stale keep --name sindy_m100 --out models/sindy_m100.json --force
 # PD: bounded least squares, m = 2.4 kg, inertias 0.05, 0.05, 0.09 kg m² (docs/pd-fit.md).
-$uavgen identify --method pd "${TRAIN[@]}" --name pd_m100 --out models/pd_m100.json --force
+$uavgen identify --method pd "${TRAIN[@]}" --input-delay none --stale keep --name pd_m100 \
+    --out models/pd_m100.json --force

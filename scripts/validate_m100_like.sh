@@ -16,23 +16,20 @@ track() {
     $U track "$@" || rc=$?
     if [ $rc -ne 0 ] && [ $rc -ne 3 ] && [ $rc -ne 4 ]; then exit $rc; fi
 }
-# Identification data: 240 s of excitation; a held-out log for the prediction figures.
-$U simulate --plant $PLANT --profile excite --duration 240 --seed 11 --out "$OUT/excite.csv" --force
+# Identification data: 180 s of excitation; a held-out log for the prediction figures.
+$U simulate --plant $PLANT --profile excite --duration 180 --seed 11 --out "$OUT/excite.csv" --force
 $U simulate --plant $PLANT --profile excite,circle --duration 60,30 --seed 12 --out "$OUT/test.csv" --force
-# The command delays measured on the real M100 (scripts/estimate_m100_like.py, docs/simulate.md).
-DELAY="u_vz=0.133,u_roll=0.076,u_pitch=0.09,u_yaw_rate=0.176"
-for variant in plain delay; do
-    extra=()
-    [ "$variant" = delay ] && extra=(--input-delay "$DELAY")
-    $U identify --method pd --mass 2.9 --log "$OUT/excite.csv" "${extra[@]}" \
+# Two variants: `auto` is identify's default path (the command delays, and lags where they help,
+# estimated from the log itself; the sparsity swept and selected; stale rows interpolated), `none`
+# fits the inputs as logged. Without the delays the SINDy fit cannot pass the horizon check, so that
+# variant falls back to threshold 32 without it (docs/validation.md).
+for variant in auto none; do
+    $U identify --method pd --mass 2.9 --log "$OUT/excite.csv" --input-delay $variant \
         --name "pd_$variant" --out "$OUT/pd_$variant.json" --force
-    # SINDy: the bounded BIC sweep; without the delays it cannot find a model that passes the
-    # horizon check, so that variant falls back to threshold 32 and skips the check.
-    if ! $U identify --method sindy --log "$OUT/excite.csv" "${extra[@]}" --sweep \
-        --sweep-values 16,20,24,32,40,48,64 --criterion bic --name "sindy_$variant" \
-        --out "$OUT/sindy_$variant.json" --force; then
-        $U identify --method sindy --log "$OUT/excite.csv" "${extra[@]}" --threshold 32 --no-horizon-check \
-            --name "sindy_$variant" --out "$OUT/sindy_$variant.json" --force
+    if ! $U identify --method sindy --log "$OUT/excite.csv" --input-delay $variant \
+        --name "sindy_$variant" --out "$OUT/sindy_$variant.json" --force; then
+        $U identify --method sindy --log "$OUT/excite.csv" --input-delay $variant --threshold 32 \
+            --no-horizon-check --name "sindy_$variant" --out "$OUT/sindy_$variant.json" --force
     fi
     for m in pd sindy; do
         $U evaluate --model "$OUT/${m}_$variant.json" --log "$OUT/test.csv" --json "$OUT/eval_${m}_$variant.json" --force >/dev/null

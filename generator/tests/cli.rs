@@ -488,6 +488,10 @@ fn identify_and_evaluate_from_logs() {
         "sindy",
         "--log",
         log.to_str().unwrap(),
+        "--threshold",
+        "0.05",
+        "--input-delay",
+        "none",
         "--out",
         dense.to_str().unwrap(),
     ]);
@@ -620,4 +624,172 @@ fn identify_with_input_delay_writes_the_latency_and_refuses_bad_specs() {
         assert!(stderr(&o).contains(named), "{spec}: {}", stderr(&o));
         assert!(!bad.exists());
     }
+}
+
+/// The default path: the sparsity swept and selected, the delays estimated from the log itself
+/// (an m100_like excitation flight, whose command delays are known), stale rows interpolated.
+#[test]
+fn identify_defaults_estimate_the_delays_and_write_a_bounded_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = tmp.path().join("excite.csv");
+    let plant = repo().join("plants/m100_like.json");
+    let o = uavgen(&[
+        "simulate",
+        "--plant",
+        plant.to_str().unwrap(),
+        "--profile",
+        "excite",
+        "--duration",
+        "180",
+        "--seed",
+        "11",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = tmp.path().join("sindy.json");
+    let o = uavgen(&[
+        "identify",
+        "--method",
+        "sindy",
+        "--log",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("interpolated (--stale interpolate)"), "{err}");
+    assert!(err.contains("--input-delay auto"), "{err}");
+    assert!(err.contains("stayed bounded"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&fs::read_to_string(&out).unwrap()).unwrap();
+    let c = &v["corrections"];
+    // The plant's delays (u_vz, u_roll, u_pitch, u_yaw_rate); found within one sample (1/30 s),
+    // counting a fitted lag as part of the response time.
+    let truth = [
+        ("u_vz", 0.133),
+        ("u_roll", 0.076),
+        ("u_pitch", 0.09),
+        ("u_yaw_rate", 0.176),
+    ];
+    for (name, d) in truth {
+        let found = c["latency"][name].as_f64().unwrap_or(0.0) + c["actuator_lag"][name].as_f64().unwrap_or(0.0);
+        assert!(
+            (found - d).abs() <= 1.0 / 30.0 + 1e-9,
+            "{name}: {found} against {d}\n{err}"
+        );
+    }
+    assert_eq!(v["provenance"]["stale"], "interpolate");
+    assert!(v["provenance"]["input_response"]["channels"]["u_vz"]["delay_range"].is_array());
+    // The model loads with its corrections, and the generator reads the delays.
+    let model = uavgen::load(&out).unwrap_or_else(|e| panic!("{e}"));
+    assert!(model.input_delays()[0] > 0.0);
+}
+
+/// `--input-delay none --stale keep` is the identification of before: the inputs as logged, no
+/// corrections, the same coefficients as the library's fit on the plain dataset.
+#[test]
+fn identify_input_delay_none_keeps_the_inputs_as_logged() {
+    use uavgen::identify::dataset::{build, DatasetOptions};
+    use uavgen::identify::sindy::{self, Optimizer, SindyOptions};
+    let tmp = tempfile::tempdir().unwrap();
+    let log = tmp.path().join("flight.csv");
+    simulated_log(&log, 600);
+    let out = tmp.path().join("none.json");
+    let o = uavgen(&[
+        "identify",
+        "--method",
+        "sindy",
+        "--log",
+        log.to_str().unwrap(),
+        "--threshold",
+        "5",
+        "--input-delay",
+        "none",
+        "--stale",
+        "keep",
+        "--no-horizon-check",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("estimating input delays"));
+    let v: serde_json::Value = serde_json::from_str(&fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(v.get("corrections").is_none(), "{v}");
+    let logs = vec![uavgen::logs::read_log(&log).unwrap()];
+    let data = build(&logs, &DatasetOptions::default()).unwrap();
+    let options = SindyOptions {
+        optimizer: Optimizer::Stlsq {
+            threshold: 5.0,
+            alpha: 1e-3,
+            max_iter: 20,
+            unbias: true,
+        },
+        ..SindyOptions::default()
+    };
+    let fit = sindy::fit(&data, &options, "none", serde_json::json!({})).unwrap();
+    let cli = v["coefficients"].as_array().unwrap();
+    assert_eq!(cli.len(), fit.file.coefficients.len());
+    for (a, b) in cli.iter().zip(&fit.file.coefficients) {
+        assert_eq!(a["term"].as_str().unwrap(), b.term);
+        assert_eq!(a["coefficient"].as_f64().unwrap(), b.coefficient);
+    }
+}
+
+/// The M100 runs 1–5 (../shared): the default PD identification writes a model that passes its
+/// own horizon check and carries the delays it found. Skipped, visibly, without ../shared.
+#[test]
+fn identify_defaults_on_the_m100_logs() {
+    let m = repo().join("../shared/flights/m100");
+    if !m.join("m100_run1.csv").exists() {
+        eprintln!("SKIPPED: {} is absent", m.display());
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("pd.json");
+    let mut args = vec!["identify".to_string(), "--method".into(), "pd".into()];
+    for r in 1..=5 {
+        args.extend([
+            "--log".to_string(),
+            m.join(format!("m100_run{r}.csv")).display().to_string(),
+        ]);
+    }
+    args.extend(["--out".to_string(), out.display().to_string()]);
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = uavgen(&refs);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("stayed bounded"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(
+        v["corrections"]["latency"]["u_vz"].as_f64().unwrap_or(0.0) > 0.05,
+        "{err}"
+    );
+}
+
+/// The same for SINDy: the default identification of runs 1–5 is to write a model that passes its
+/// horizon check. It does not yet (135 of 257 trials unbounded; docs/identification.md, "Horizon
+/// check with defaults"): run with `--ignored` to see where it stands.
+#[test]
+#[ignore = "known gap: the default SINDy identification of the M100 runs 1-5 fails its horizon check (docs/identification.md)"]
+fn identify_sindy_defaults_on_the_m100_logs() {
+    let m = repo().join("../shared/flights/m100");
+    if !m.join("m100_run1.csv").exists() {
+        eprintln!("SKIPPED: {} is absent", m.display());
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("sindy.json");
+    let mut args = vec!["identify".to_string(), "--method".into(), "sindy".into()];
+    for r in 1..=5 {
+        args.extend([
+            "--log".to_string(),
+            m.join(format!("m100_run{r}.csv")).display().to_string(),
+        ]);
+    }
+    args.extend(["--out".to_string(), out.display().to_string()]);
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = uavgen(&refs);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("stayed bounded"), "{}", stderr(&o));
 }

@@ -46,7 +46,21 @@ fn base_model(dir: &Path, method: &str) -> PathBuf {
     let flights = flights().unwrap();
     let out = dir.join(format!("base_{method}.json"));
     let log = flights.join("rotorpy_nominal_train.csv");
-    let mut args = vec!["identify", "--method", method, "--log", s(&log), "--out", s(&out)];
+    // The base model as identify made it before delays were estimated by default: the logged
+    // inputs, stale rows kept (the withheld effects are what diagnose is to find).
+    let mut args = vec![
+        "identify",
+        "--method",
+        method,
+        "--log",
+        s(&log),
+        "--input-delay",
+        "none",
+        "--stale",
+        "keep",
+        "--out",
+        s(&out),
+    ];
     match method {
         "sindy" => args.extend(["--sweep", "--criterion", "bic"]),
         _ => args.extend(["--mass", "2.9"]),

@@ -2,14 +2,16 @@
 
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use uavgen::identify::bounded_selection::select_bounded;
+use uavgen::identify::bounded_selection::select_bounded_with;
 use uavgen::identify::dataset::{build, DatasetOptions};
 use uavgen::identify::horizon_check::{self, HorizonCheck};
 use uavgen::identify::pd::{self, PdFitOptions};
 use uavgen::identify::preprocess::{LowPass, SavGol};
+use uavgen::identify::response::{self, InputResponse, ScanOptions, ScanSegment};
 use uavgen::identify::sindy::{
     self, AicSelection, Criterion, FittedRows, LibraryKind, Optimizer, Regularizer, SindyOptions,
 };
+use uavgen::logs::stale::StalePolicy;
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Method {
@@ -72,27 +74,36 @@ pub struct IdentifyArgs {
     /// SINDy: optimiser.
     #[arg(long, value_enum, default_value_t = OptimizerArg::Stlsq)]
     optimizer: OptimizerArg,
-    /// SINDy: sparsity parameter (STLSQ threshold on normalised coefficients, SR3 λ).
-    #[arg(long, default_value_t = 0.05)]
-    threshold: f64,
-    /// SINDy: sweep the sparsity parameter and select by an information criterion.
+    /// SINDy: one sparsity parameter (STLSQ threshold on normalised coefficients, SR3 λ) instead
+    /// of the default sweep. Without it (and with --sweep) the sparsity is swept and selected.
+    #[arg(long)]
+    threshold: Option<f64>,
+    /// SINDy: sweep the sparsity parameter and select by the criterion (the default unless
+    /// --threshold is given; with --threshold, SR3's sweep is scaled by it).
     #[arg(long)]
     sweep: bool,
-    /// SINDy: the sweep's values (comma separated). Default: STLSQ thresholds 0.5, 1, 2, …, 64;
-    /// SR3 λ = --threshold × 0.1, 0.2, 0.5, 1, 2, 4, 8, 16.
+    /// SINDy: the sweep's values (comma separated). Default: STLSQ thresholds 0.5 … 256 in steps of
+    /// √2; SR3 λ = --threshold (0.05) × 0.1, 0.2, 0.5, 1, 2, 4, 8, 16.
     #[arg(long, value_delimiter = ',')]
     sweep_values: Option<Vec<f64>>,
     /// Write the model even if it fails the horizon check (one MPC horizon of free run from random
     /// envelope states under constant, often saturated, inputs must stay bounded).
     #[arg(long)]
     no_horizon_check: bool,
-    /// SINDy: criterion of the sweep.
-    #[arg(long, value_enum, default_value_t = CriterionArg::Aic)]
+    /// SINDy: criterion of the sweep (per row, effective sample count).
+    #[arg(long, value_enum, default_value_t = CriterionArg::Bic)]
     criterion: CriterionArg,
-    /// Pure input delay to fit with, written to the model as `corrections.latency` (the runtime
-    /// compensates it): seconds for every input, or per channel `u_vz=0.13,u_roll=0.08,…`.
-    #[arg(long)]
-    input_delay: Option<String>,
+    /// Input delays: `auto` (default) estimates each channel's delay (0 … 0.5 s) and, where it
+    /// improves held-out free runs, a first-order lag (0.02 … 0.8 s) from the logs and writes them
+    /// as `corrections.latency` / `corrections.actuator_lag`; `none` fits the inputs as logged; or
+    /// seconds for every input, or per channel `u_vz=0.13,u_roll=0.08,…` (the others 0), no lags.
+    #[arg(long, default_value = "auto")]
+    input_delay: String,
+    /// Stale rows (the state repeats the previous row's, sample-and-hold telemetry): `interpolate`
+    /// (default) treats them as missing samples and interpolates their states before
+    /// differentiating; `keep` uses the log as recorded (docs/logs.md).
+    #[arg(long, value_enum, default_value_t = StalePolicy::Interpolate)]
+    stale: StalePolicy,
     /// PD: mass in kg.
     #[arg(long, default_value_t = 2.4)]
     mass: f64,
@@ -101,8 +112,14 @@ pub struct IdentifyArgs {
     lowpass: Option<f64>,
 }
 
-/// The default STLSQ sweep: thresholds on normalised columns (they scale like √N, docs/sindy.md).
-const STLSQ_SWEEP: [f64; 8] = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0];
+/// The default STLSQ sweep: thresholds on normalised columns (they scale like √N, docs/sindy.md),
+/// 0.5 … 256 in steps of √2 (the bounded selection needs sparse values to move rows to).
+fn stlsq_sweep() -> Vec<f64> {
+    (0..=18)
+        .map(|i| 0.5 * 2f64.powf(i as f64 / 2.0))
+        .map(|v| (v * 1e3).round() / 1e3)
+        .collect()
+}
 /// The default SR3 sweep, as multiples of --threshold.
 const SR3_SWEEP: [f64; 8] = [0.1, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
 
@@ -117,6 +134,21 @@ pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
 }
 
 const INPUTS: [&str; 4] = ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"];
+
+/// What `--input-delay` asks for.
+enum DelaySpec {
+    Auto,
+    None,
+    List([f64; 4]),
+}
+
+fn parse_delay_spec(spec: &str) -> Result<DelaySpec, String> {
+    match spec.trim() {
+        "auto" => Ok(DelaySpec::Auto),
+        "none" => Ok(DelaySpec::None),
+        _ => parse_input_delay(spec).map(DelaySpec::List),
+    }
+}
 
 /// `0.1` (every input) or `u_vz=0.13,u_roll=0.08` (the others 0), in seconds.
 fn parse_input_delay(spec: &str) -> Result<[f64; 4], String> {
@@ -135,7 +167,7 @@ fn parse_input_delay(spec: &str) -> Result<[f64; 4], String> {
     for part in spec.split(',') {
         let (name, value) = part
             .split_once('=')
-            .ok_or_else(|| bad("expected seconds, or name=seconds pairs separated by commas"))?;
+            .ok_or_else(|| bad("expected auto, none, seconds, or name=seconds pairs separated by commas"))?;
         let j = INPUTS.iter().position(|n| *n == name.trim()).ok_or_else(|| {
             bad(&format!(
                 "unknown input '{}' (inputs: {})",
@@ -161,6 +193,37 @@ fn check_positive(name: &str, v: f64) -> Result<(), String> {
     }
 }
 
+/// The round-trip-safe value written to the model file (0.1 ms).
+fn round_s(v: f64) -> f64 {
+    (v * 1e4).round() / 1e4
+}
+
+/// Estimate the input response from the logs (`--input-delay auto`).
+fn estimate_response(logs: &[uavgen::logs::FlightLog], savgol: SavGol) -> Result<response::ResponseEstimate, String> {
+    let whole = build(
+        logs,
+        &DatasetOptions {
+            savgol,
+            trim_edges: false,
+            ..DatasetOptions::default()
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    let segments: Vec<ScanSegment> = whole
+        .segments
+        .into_iter()
+        .map(|s| ScanSegment {
+            log: s.log,
+            dt: s.dt,
+            h: savgol.half_window(),
+            x: s.x,
+            u: s.u,
+            dx: s.dx,
+        })
+        .collect();
+    response::estimate(&segments, &ScanOptions::default()).map_err(|e| e.to_string())
+}
+
 pub fn run(args: IdentifyArgs) -> Result<(), String> {
     if args.out.exists() && !args.force {
         return Err(format!("{}: exists; pass --force to overwrite it", args.out.display()));
@@ -172,55 +235,126 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         .unwrap_or_else(|| "identified".into());
     let savgol = SavGol::new(args.savgol_window, args.savgol_order)
         .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
+    let delay_spec = parse_delay_spec(&args.input_delay)?;
+    if let Some(t) = args.threshold {
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(format!("--threshold: must be a finite number >= 0, got {t}"));
+        }
+    }
+    if args.sweep_values.is_some() && !args.sweep && args.threshold.is_some() {
+        return Err("--sweep-values: not with --threshold (a single sparsity value) unless --sweep is given".into());
+    }
+    if let Some(v) = &args.sweep_values {
+        if v.is_empty() || v.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
+            return Err(format!(
+                "--sweep-values: every value must be a finite number >= 0, got {v:?}"
+            ));
+        }
+    }
     let mut logs = Vec::new();
     for path in &args.logs {
         let log = uavgen::logs::read_log(path).map_err(|e| e.to_string())?;
         for w in log.report.warnings() {
             eprintln!("warning: {}: {w}", path.display());
         }
-        logs.push(log);
+        let (stale, rows) = (log.report.stale_states(), log.rows());
+        if stale > 0 {
+            eprintln!(
+                "{}: {stale} of {rows} rows stale (state repeats the previous row): {}",
+                path.display(),
+                match args.stale {
+                    StalePolicy::Interpolate => "interpolated (--stale interpolate)",
+                    StalePolicy::Keep => "kept as logged (--stale keep)",
+                }
+            );
+        }
+        logs.push(log.with_stale(args.stale));
     }
-    let input_delay = match &args.input_delay {
-        Some(spec) => parse_input_delay(spec)?,
-        None => [0.0; 4],
+    let (response, estimate) = match delay_spec {
+        DelaySpec::None => (None, None),
+        DelaySpec::List(d) => (
+            Some(InputResponse {
+                delay: d,
+                lag: [None; 4],
+            }),
+            None,
+        ),
+        DelaySpec::Auto => {
+            eprintln!(
+                "estimating input delays and lags (--input-delay auto: delays 0..0.5 s, lags 0.02..0.8 s; held-out one-step error of the driven row, guarded by its loop's held-out free runs) ..."
+            );
+            let est = estimate_response(&logs, savgol)?;
+            eprintln!(
+                "  held out: {} {}; per channel: delay (Δχ² = 1 range), lag, one-step and loop free-run RMSE before -> after",
+                est.folds, est.fold_kind
+            );
+            for c in &est.channels {
+                eprintln!("  {}", c.line());
+            }
+            (Some(est.response), Some(est))
+        }
     };
     let dataset = build(
         &logs,
         &DatasetOptions {
             savgol,
-            input_delay,
+            response,
             ..DatasetOptions::default()
         },
     )
     .map_err(|e| e.to_string())?;
     let files: Vec<String> = args.logs.iter().map(|p| p.display().to_string()).collect();
-    let provenance = serde_json::json!({
+    let mut provenance = serde_json::json!({
         "tool": format!("uavgen {} identify", env!("CARGO_PKG_VERSION")),
         "logs": files,
         "samples": dataset.len(),
         "savitzky_golay": { "window": savgol.window, "order": savgol.order },
+        "stale": args.stale.name(),
+        "input_delay": args.input_delay.trim(),
     });
+    if let Some(est) = &estimate {
+        let channels: serde_json::Map<String, serde_json::Value> = est
+            .channels
+            .iter()
+            .map(|c| {
+                (
+                    c.input.to_string(),
+                    serde_json::json!({
+                        "delay": round_s(c.delay),
+                        "delay_range": [round_s(c.delay_range.0), round_s(c.delay_range.1)],
+                        "lag": c.lag.map(round_s),
+                        "lag_range": c.lag_range.map(|(a, b)| [round_s(a), round_s(b)]),
+                        "held_out_one_step_rmse": [c.one_step_rmse.0, c.one_step_rmse.1],
+                        "held_out_horizon_rmse": [c.horizon_rmse.0, c.horizon_rmse.1, c.horizon_rmse.2],
+                        "evidence": c.evidence,
+                        "note": c.note,
+                    }),
+                )
+            })
+            .collect();
+        provenance["input_response"] = serde_json::json!({
+            "held_out": format!("{} {}", est.folds, est.fold_kind),
+            "channels": channels,
+        });
+    }
     let json = match args.method {
         Method::Sindy => {
-            check_positive("threshold", args.threshold)
-                .or_else(|e| if args.threshold == 0.0 { Ok(()) } else { Err(e) })?;
+            let threshold = args.threshold.unwrap_or(0.05);
             let optimizer = match args.optimizer {
                 OptimizerArg::Stlsq => Optimizer::Stlsq {
-                    threshold: args.threshold,
+                    threshold,
                     alpha: 1e-3,
                     max_iter: 20,
                     unbias: true,
                 },
-                OptimizerArg::Sr3L0 => Optimizer::sr3(Regularizer::L0, args.threshold),
-                OptimizerArg::Sr3L1 => Optimizer::sr3(Regularizer::L1, args.threshold),
+                OptimizerArg::Sr3L0 => Optimizer::sr3(Regularizer::L0, threshold),
+                OptimizerArg::Sr3L1 => Optimizer::sr3(Regularizer::L1, threshold),
             };
-            if args.sweep_values.is_some() && !args.sweep {
-                return Err("--sweep-values: only with --sweep".into());
-            }
-            let sweep = args.sweep.then(|| match (&args.sweep_values, args.optimizer) {
+            let sweeping = args.sweep || args.threshold.is_none();
+            let sweep = sweeping.then(|| match (&args.sweep_values, args.optimizer) {
                 (Some(v), _) => v.clone(),
-                (None, OptimizerArg::Stlsq) => STLSQ_SWEEP.to_vec(),
-                (None, _) => SR3_SWEEP.iter().map(|f| args.threshold.max(1e-3) * f).collect(),
+                (None, OptimizerArg::Stlsq) => stlsq_sweep(),
+                (None, _) => SR3_SWEEP.iter().map(|f| threshold.max(1e-3) * f).collect(),
             });
             let options = SindyOptions {
                 library: match args.library {
@@ -254,7 +388,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             bar.finish_and_clear();
             let mut fit = fit;
             if options.sweep.is_some() && !args.no_horizon_check {
-                if let Some(sel) = select_bounded(&mut fit, &HorizonCheck::default()) {
+                let check = HorizonCheck::default();
+                let with = |fit: &sindy::SindyFit| attach(&fit.to_json(), &args, response);
+                if let Some(sel) = select_bounded_corrected(&mut fit, &check, &with) {
                     for (row, from, to) in &sel.moves {
                         eprintln!("  horizon check: {row} moved from sparsity {from} to {to}");
                     }
@@ -288,32 +424,21 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())?
         }
     } + "\n";
-    let json = if input_delay.iter().any(|&d| d > 0.0) {
-        let latency = INPUTS
-            .iter()
-            .zip(input_delay)
-            .filter(|(_, d)| *d > 0.0)
-            .map(|(n, d)| (n.to_string(), d))
-            .collect();
-        let corrections = uavgen::model::Corrections {
-            source: Some("uavgen identify --input-delay: the model was fitted to u(t - delay)".into()),
-            latency,
-            ..Default::default()
-        };
-        uavgen::model::attach_corrections(&json, &args.out.display().to_string(), &corrections)
-            .map_err(|e| e.to_string())?
-    } else {
-        json
-    };
+    let json = attach(&json, &args, response)?;
     // Exactly what `--model` will read, validated before anything is written.
     let model = uavgen::model::parse(&json, &args.out.display().to_string())
         .map_err(|e| format!("the identified model is invalid: {e}"))?;
+    if let Some(c) = model.corrections.as_ref() {
+        for line in c.summary(&model.inputs) {
+            eprintln!("  corrections: {}", line.trim());
+        }
+    }
     if let Some(report) = horizon_check::check(&model, &HorizonCheck::default()) {
         eprintln!("{}", report.summary());
         if !report.passed() && !args.no_horizon_check {
             return Err(format!(
                 "{}: not written: the identified model leaves the bounds within one MPC horizon ({} of {} trials); \
-                 raise --threshold (or pick a sparser sweep), or pass --no-horizon-check to write it anyway",
+                 give sparser --sweep-values (or a larger --threshold), or pass --no-horizon-check to write it anyway",
                 args.out.display(),
                 report.unbounded,
                 report.trials
@@ -323,4 +448,48 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     super::write_atomically(&args.out, &json)?;
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// The model text with the input response as `corrections` (latency, actuator_lag).
+fn attach(json: &str, args: &IdentifyArgs, response: Option<InputResponse>) -> Result<String, String> {
+    let Some(r) = response.filter(|r| !r.is_identity()) else {
+        return Ok(json.to_string());
+    };
+    let latency = INPUTS
+        .iter()
+        .zip(r.delay)
+        .filter(|(_, d)| round_s(*d) > 0.0)
+        .map(|(n, d)| (n.to_string(), round_s(d)))
+        .collect();
+    let actuator_lag = INPUTS
+        .iter()
+        .zip(r.lag)
+        .filter_map(|(n, l)| l.map(|t| (n.to_string(), round_s(t))))
+        .collect();
+    let source = match parse_delay_spec(&args.input_delay) {
+        Ok(DelaySpec::Auto) => {
+            "uavgen identify --input-delay auto: delays and lags estimated from the logs; the model was fitted to the inputs they give"
+        }
+        _ => "uavgen identify --input-delay: the model was fitted to u(t - delay)",
+    };
+    let corrections = uavgen::model::Corrections {
+        source: Some(source.into()),
+        latency,
+        actuator_lag,
+        ..Default::default()
+    };
+    uavgen::model::attach_corrections(json, &args.out.display().to_string(), &corrections).map_err(|e| e.to_string())
+}
+
+/// [`select_bounded`] on the model as it will be written (with its corrections).
+fn select_bounded_corrected(
+    fit: &mut sindy::SindyFit,
+    check: &HorizonCheck,
+    with: &dyn Fn(&sindy::SindyFit) -> Result<String, String>,
+) -> Option<uavgen::identify::bounded_selection::BoundedSelection> {
+    select_bounded_with(fit, &|f| {
+        let text = with(f).ok()?;
+        let model = uavgen::model::parse(&text, "identified model").ok()?;
+        horizon_check::check(&model, check)
+    })
 }

@@ -31,7 +31,24 @@ fn run_check(fit: &SindyFit, options: &HorizonCheck) -> Option<HorizonReport> {
 /// module docs). Returns `None` for models the check does not apply to. On return `fit` holds the
 /// final selection; `report.passed()` says whether it passes.
 pub fn select_bounded(fit: &mut SindyFit, options: &HorizonCheck) -> Option<BoundedSelection> {
-    let mut report = run_check(fit, options)?;
+    select_bounded_with(fit, &|f| run_check(f, options))
+}
+
+/// [`select_bounded`] with the check given as a function of the fit (e.g. the model with the
+/// `corrections` it will be written with: `uavgen identify` checks the model it writes).
+pub fn select_bounded_with(
+    fit: &mut SindyFit,
+    run_check: &dyn Fn(&SindyFit) -> Option<HorizonReport>,
+) -> Option<BoundedSelection> {
+    search(fit, run_check, false)
+}
+
+fn search(
+    fit: &mut SindyFit,
+    run_check: &dyn Fn(&SindyFit) -> Option<HorizonReport>,
+    relaxed: bool,
+) -> Option<BoundedSelection> {
+    let mut report = run_check(fit)?;
     let mut moves = Vec::new();
     // Sweep indices in increasing sparsity-parameter order.
     let mut order: Vec<usize> = (0..fit.sweep.len()).collect();
@@ -54,7 +71,7 @@ pub fn select_bounded(fit: &mut SindyFit, options: &HorizonCheck) -> Option<Boun
                 let mut trial = start.clone();
                 trial[t] = next;
                 fit.choose(&trial);
-                let Some(r) = run_check(fit, options) else { continue };
+                let Some(r) = run_check(fit) else { continue };
                 let rise = fit.sweep[next].rows[t].rss - fit.sweep[start[t]].rows[t].rss;
                 let better = match &best {
                     None => true,
@@ -68,7 +85,7 @@ pub fn select_bounded(fit: &mut SindyFit, options: &HorizonCheck) -> Option<Boun
             }
         }
         // A move must not leave more trials unbounded; every move removes terms, so this ends.
-        let Some((t, next, _, trial, r)) = best.filter(|b| b.4.unbounded <= report.unbounded) else {
+        let Some((t, next, _, trial, r)) = best.filter(|b| relaxed || b.4.unbounded <= report.unbounded) else {
             fit.choose(&start);
             break;
         };

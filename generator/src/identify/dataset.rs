@@ -3,6 +3,7 @@
 //! SINDy and PD fits and for evaluation.
 
 use super::preprocess::{try_columnwise, LowPass, PreprocessError, SavGol};
+use super::response::InputResponse;
 use crate::logs::FlightLog;
 
 /// How logs become identification data.
@@ -20,8 +21,14 @@ pub struct DatasetOptions {
     pub smooth_states: bool,
     /// Pure delay of each input channel (s, LOG_FORMAT.md input order): the sample at k is paired
     /// with the input logged round(delay/Δt) samples earlier, u_j(t − d_j), so the fitted model is
-    /// ẋ = f(x, u(t − d)); the first max_j d_j samples of each segment are dropped.
+    /// ẋ = f(x, u(t − d)); the first max_j d_j samples of each segment are dropped. Ignored
+    /// when `response` is given.
     pub input_delay: [f64; 4],
+    /// Delay and first-order lag per input channel, applied as the Savitzky-Golay derivatives
+    /// see them ([`InputResponse::regressors`]: fractional delays, centred on the sample
+    /// instants); the first [`InputResponse::warmup`] samples of each segment are dropped.
+    /// `None`: the inputs as logged (shifted by `input_delay`).
+    pub response: Option<InputResponse>,
 }
 
 impl Default for DatasetOptions {
@@ -32,6 +39,7 @@ impl Default for DatasetOptions {
             trim_edges: true,
             smooth_states: false,
             input_delay: [0.0; 4],
+            response: None,
         }
     }
 }
@@ -110,19 +118,25 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
             } else {
                 seg.x.clone()
             };
-            // u_j(t − d_j): each channel shifted by its delay in samples.
-            let shift: Vec<usize> = options
-                .input_delay
-                .iter()
-                .map(|d| (d.max(0.0) / dt).round() as usize)
-                .collect();
-            let max_shift = shift.iter().copied().max().unwrap_or(0);
-            let mut u = seg.u.clone();
-            for k in (0..u.len()).rev() {
-                for (j, &s) in shift.iter().enumerate() {
-                    u[k][j] = seg.u[k.saturating_sub(s)][j];
+            let (mut u, max_shift) = match &options.response {
+                Some(r) => (r.regressors(&seg.u, dt), r.warmup(dt)),
+                None => {
+                    // u_j(t − d_j): each channel shifted by its delay in samples.
+                    let shift: Vec<usize> = options
+                        .input_delay
+                        .iter()
+                        .map(|d| (d.max(0.0) / dt).round() as usize)
+                        .collect();
+                    let max_shift = shift.iter().copied().max().unwrap_or(0);
+                    let mut u = seg.u.clone();
+                    for k in (0..u.len()).rev() {
+                        for (j, &s) in shift.iter().enumerate() {
+                            u[k][j] = seg.u[k.saturating_sub(s)][j];
+                        }
+                    }
+                    (u, max_shift)
                 }
-            }
+            };
             let mut dx = dx;
             if let Some(lp) = &options.lowpass {
                 x = try_columnwise(&x, |y| lp.try_apply(y, dt)).map_err(err)?;

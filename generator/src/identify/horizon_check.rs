@@ -104,12 +104,23 @@ fn round(v: &[f64]) -> Vec<f64> {
     v.iter().map(|a| (a * 1e3).round() / 1e3).collect()
 }
 
-/// Run the check on a model with the 12 standard states and 4 inputs (LOG_FORMAT.md order); other
-/// models are not checked (`None`).
+/// Run the check on a model with the 12 standard states and 4 inputs (LOG_FORMAT.md order),
+/// plus the extra states of its `corrections` (an input lag state `<input>_lagged` starts anywhere
+/// within that input's bounds, so a trial also sees the lag catch up with a changed command; an
+/// acceleration lag state and `flight_time` start at 0); other models are not checked (`None`).
 pub fn check(model: &Model, options: &HorizonCheck) -> Option<HorizonReport> {
-    if model.states != crate::model::DEFAULT_STATES || model.inputs != crate::model::DEFAULT_INPUTS {
+    if model.base_states() != crate::model::DEFAULT_STATES || model.inputs != crate::model::DEFAULT_INPUTS {
         return None;
     }
+    let nx = model.nx();
+    let lagged: Vec<Option<usize>> = model.states[12..]
+        .iter()
+        .map(|s| {
+            crate::model::DEFAULT_INPUTS
+                .iter()
+                .position(|i| s.strip_suffix("_lagged") == Some(*i))
+        })
+        .collect();
     let ir = ModelIr::new(model);
     let substeps = auto_substeps(&ir, options.dt, &Envelope::default())
         .map(|c| c.substeps)
@@ -122,7 +133,7 @@ pub fn check(model: &Model, options: &HorizonCheck) -> Option<HorizonReport> {
         substeps,
     };
     for trial in 0..=options.trials {
-        let mut x0 = vec![0.0; 12];
+        let mut x0 = vec![0.0; nx];
         let mut u = vec![0.0; 4];
         if trial > 0 {
             let mut uniform = |b: f64| rng.gen_range(-b..=b);
@@ -140,6 +151,11 @@ pub fn check(model: &Model, options: &HorizonCheck) -> Option<HorizonReport> {
                 u[j] = uniform(*b);
                 if trial % 2 == 0 {
                     u[j] = b.copysign(u[j]);
+                }
+            }
+            for (e, input) in lagged.iter().enumerate() {
+                if let Some(j) = input {
+                    x0[12 + e] = uniform(options.inputs[*j]);
                 }
             }
         }

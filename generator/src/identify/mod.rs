@@ -3,4 +3,5 @@ pub mod dataset;
 pub mod horizon_check;
 pub mod pd;
 pub mod preprocess;
+pub mod response;
 pub mod sindy;
