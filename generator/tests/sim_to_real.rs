@@ -1,5 +1,6 @@
 //! The sim-to-real protocol of docs/diagnosis.md on a reduced set: a SINDy base model identified
-//! (default options) from a 120 s flight of the nominal simulator, diagnosed against the real M100
+//! (with the settings of the shipped sindy_m100, [`SETTINGS`]) from a 120 s flight of the nominal
+//! simulator, diagnosed against the real M100
 //! logs (runs 1–5, run 7 held out). Checks the acceptance of issue 13:
 //!
 //! - the verdict names the command channels' response: `loop_mismatch`, with the corrected model's
@@ -16,6 +17,20 @@ mod common;
 use common::{repo, uavgen};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
+
+/// The identification settings of the base model and of R: those of scripts/identify_m100.sh. With
+/// identify's defaults the SINDy fit on runs 1–5 fails its own horizon check (docs/identification.md).
+const SETTINGS: [&str; 9] = [
+    "--input-delay",
+    "none",
+    "--stale",
+    "keep",
+    "--sweep",
+    "--sweep-values",
+    "16,20,24,32,40,48,64",
+    "--criterion",
+    "bic",
+];
 
 fn m100() -> Option<PathBuf> {
     let dir = repo().join("../shared/flights/m100");
@@ -139,6 +154,7 @@ fn simulator_model_on_the_m100() {
     // R: identified on runs 1–5 with the same settings.
     let r_model = dir.join("r.json");
     let mut args = vec!["identify", "--method", "sindy", "--out", s(&r_model), "--force"];
+    args.extend(SETTINGS);
     for r in &runs {
         args.extend(["--log", s(r)]);
     }
