@@ -6,6 +6,7 @@ use super::candidate::Candidate;
 use super::catalogue::{self, EffectKind};
 use super::data::Prepared;
 use super::report_json::{self, EffectReport, RoundEntry, RoundReport};
+use super::response_time::ChannelTime;
 use super::select::{Round, State};
 use super::DiagnoseOptions;
 
@@ -122,6 +123,46 @@ pub(crate) fn rounds(rounds: &[Round]) -> Vec<RoundReport> {
             }
         })
         .collect()
+}
+
+/// How the residual analysis's cross-correlation (the aircraft's whole response) and the fitted
+/// corrections (what the base model lacks of it) relate, channel by channel.
+pub(crate) fn xcorr_note(where_report: Option<&crate::analysis::WhereReport>, times: &[ChannelTime]) -> Option<String> {
+    let w = where_report?;
+    let parts: Vec<String> = w
+        .response_lags
+        .iter()
+        .zip(times)
+        .map(|(lag, t)| {
+            let x = &lag.xcorr;
+            let data = if x.significant && x.localised && x.peak_seconds > 0.0 {
+                format!("the data's {} follows {} by {:.2} s", lag.response, lag.input, x.peak_seconds)
+            } else if x.significant && x.localised {
+                format!(
+                    "{} → {}: the cross-correlation peaks at {:.2} s (the state leads the command: feedback, not a delay)",
+                    lag.input, lag.response, x.peak_seconds
+                )
+            } else {
+                format!("{} → {}: no localised lag in the data", lag.input, lag.response)
+            };
+            let ms = |r: &super::response_time::Response| r.t63.map_or("—".to_string(), |v| format!("{v:.2} s"));
+            format!(
+                "{data}; the base model's {} answers in {} (63 %), the corrected model's in {}",
+                t.output,
+                ms(&t.base),
+                ms(&t.corrected)
+            )
+        })
+        .collect();
+    (!parts.is_empty()).then(|| {
+        format!(
+            "cross-correlation and fits: the cross-correlation measures the aircraft's whole response to a command, the \
+             fitted delays, lags and loop gains only what the base model lacks of it (its own loops already take time), \
+             so a fitted delay is shorter than the lag in the data; compare the data's lag with the corrected model's \
+             response instead: {}",
+            parts.join("; ")
+        )
+    })
 }
 
 /// Notes on the data and the named effects.

@@ -577,6 +577,15 @@ fn run(
     let effects = assemble::effects(&rounds, &state, &linear, options.rotor_radius);
     let rounds_report = assemble::rounds(&rounds);
     notes.extend(assemble::notes(&data, &state, options));
+    let response_named = [
+        EffectKind::Latency,
+        EffectKind::ActuatorLag,
+        EffectKind::ChannelResponse,
+        EffectKind::LoopMismatch,
+    ];
+    if state.named.iter().any(|k| response_named.contains(k)) {
+        notes.extend(assemble::xcorr_note(where_report.as_ref(), &response_times));
+    }
     // corrected.json (null when the model text is not at hand: see `Diagnosis::corrected_from`).
     let text = options
         .model_text
