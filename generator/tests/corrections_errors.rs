@@ -92,7 +92,7 @@ fn schema_errors_carry_the_path_under_corrections() {
         ),
         (
             json!({"wind": [1, 0, 0]}),
-            "bad.json: corrections.wind: unknown field `wind`, expected one of `source`, `linear_drag`, `quadratic_drag`, `force_bias`, `thrust_gain`, `thrust_decay`, `ground_effect`, `actuator_lag`, `acceleration_lag`, `latency`",
+            "bad.json: corrections.wind: unknown field `wind`, expected one of `source`, `linear_drag`, `quadratic_drag`, `force_bias`, `thrust_gain`, `thrust_decay`, `ground_effect`, `actuator_lag`, `acceleration_lag`, `latency`, `input_gain`, `loop_mismatch`",
         ),
         (
             json!({"force_bias": [0.1, 0.2]}),
