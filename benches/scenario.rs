@@ -168,14 +168,17 @@ pub fn measured_step(mpc: &mut Mpc, reference: &[[Real; NX]; N + 1], x: &[Real; 
     mpc.feedback(x).u0
 }
 
-/// `steps` deterministic steps of the circular trajectory through [`measured_step`].
+/// `steps` deterministic steps of each of the scenario's 3 trajectories (as in [`run`]) through
+/// [`measured_step`]: call number `t · steps + k + 1` is step k of trajectory t.
 pub fn run_for_instruction_count(steps: usize, seed: u64) {
-    let mut mpc = Mpc::new();
-    let mut scenario = Scenario::new(1, seed);
-    for _ in 0..steps {
-        let reference = scenario.reference();
-        let u = measured_step(&mut mpc, &reference, &scenario.x);
-        scenario.advance(&u);
-        mpc.shift();
+    for which in 0..3 {
+        let mut mpc = Mpc::new();
+        let mut scenario = Scenario::new(which, seed);
+        for _ in 0..steps {
+            let reference = scenario.reference();
+            let u = measured_step(&mut mpc, &reference, &scenario.x);
+            scenario.advance(&u);
+            mpc.shift();
+        }
     }
 }

@@ -57,7 +57,7 @@ struct BenchArgs {
     /// Steps per trajectory for the generic solver.
     #[arg(long, default_value_t = 100)]
     generic_steps: usize,
-    /// Count instructions of this many RTI steps under callgrind (0: skip).
+    /// Count instructions of this many RTI steps per trajectory (3 trajectories, as timed) under callgrind (0: skip).
     #[arg(long, default_value_t = 0)]
     instructions: usize,
     /// Build with -C target-cpu=native.
@@ -329,13 +329,14 @@ fn bench(args: BenchArgs) -> Result<(), String> {
     );
     let instructions = if options.instruction_steps > 0 {
         eprintln!(
-            "counting instructions of {} steps under callgrind ...",
+            "counting instructions of {} steps on each of 3 trajectories under callgrind ...",
             options.instruction_steps
         );
         let c = count_instructions(&binary, &options)?;
+        let trajectory = ["sinusoidal", "circular", "spiral"][c.max_at.0.min(2)];
         println!(
-            "  instructions per RTI step (callgrind, {} steps of the circle): median {}, max {}",
-            c.steps, c.median, c.max
+            "  instructions per RTI step (callgrind, {} steps of the scenario): median {}, max {} ({} trajectory, step {})",
+            c.steps, c.median, c.max, trajectory, c.max_at.1
         );
         Some(c)
     } else {

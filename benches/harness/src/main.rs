@@ -4,7 +4,7 @@
 //!
 //! `harness [--steps N] [--seed S] [--name NAME]` prints one JSON object with
 //! the timings of N RTI steps on each of the paper's 3 trajectories (pinned to
-//! the last CPU core when possible); `harness --callgrind N` runs N steps
+//! the last CPU core when possible); `harness --callgrind N` runs N steps of each trajectory
 //! through `measured_step` for instruction counting under callgrind.
 
 // `Real` may be f32 or f64, so `as f64` casts are needed in general; `is_multiple_of`

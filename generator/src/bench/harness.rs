@@ -28,6 +28,8 @@ pub struct InstructionCounts {
     pub steps: usize,
     pub median: u64,
     pub max: u64,
+    /// Where the largest count was: (trajectory 0..3, step).
+    pub max_at: (usize, usize),
 }
 
 /// The crate's package name, checked to be a uavgen-generated crate.
@@ -131,12 +133,18 @@ pub fn count_instructions(binary: &Path, options: &BenchOptions) -> Result<Instr
     let mut counts = Vec::new();
     for entry in std::fs::read_dir(&dir).map_err(|e| e.to_string())? {
         let path = entry.map_err(|e| e.to_string())?.path();
+        // Dump number K (cg.out.K) follows the K-th call.
+        let call: usize = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .and_then(|e| e.parse().ok())
+            .unwrap_or(0);
         let text = std::fs::read_to_string(&path).map_err(|e| e.to_string())?;
         // Each dump after a call holds that call's cost in its "summary:" line.
         if let Some(n) = text.lines().find_map(|l| l.strip_prefix("summary: ")) {
             let n: u64 = n.split_whitespace().next().and_then(|v| v.parse().ok()).unwrap_or(0);
-            if n > 0 {
-                counts.push(n);
+            if n > 0 && call > 0 {
+                counts.push((n, call));
             }
         }
     }
@@ -144,9 +152,12 @@ pub fn count_instructions(binary: &Path, options: &BenchOptions) -> Result<Instr
         return Err("callgrind recorded no RTI step".into());
     }
     counts.sort_unstable();
+    let (max, call) = counts[counts.len() - 1];
+    let steps = options.instruction_steps.max(1);
     Ok(InstructionCounts {
         steps: counts.len(),
-        median: counts[counts.len() / 2],
-        max: counts[counts.len() - 1],
+        median: counts[counts.len() / 2].0,
+        max,
+        max_at: ((call - 1) / steps, (call - 1) % steps),
     })
 }
