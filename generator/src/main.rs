@@ -60,6 +60,9 @@ struct BenchArgs {
     /// Count instructions of this many RTI steps per trajectory (3 trajectories, as timed) under callgrind (0: skip).
     #[arg(long, default_value_t = 0)]
     instructions: usize,
+    /// Also count the instructions of this many trials of the adversarial search under callgrind (0: skip).
+    #[arg(long, default_value_t = 0)]
+    adversarial: usize,
     /// Build with -C target-cpu=native.
     #[arg(long)]
     native: bool,
@@ -292,6 +295,7 @@ fn bench(args: BenchArgs) -> Result<(), String> {
         seed: args.seed,
         generic_steps: args.generic_steps,
         instruction_steps: args.instructions,
+        adversarial_trials: args.adversarial,
         native: args.native,
         work_dir,
     };
@@ -342,6 +346,22 @@ fn bench(args: BenchArgs) -> Result<(), String> {
     } else {
         None
     };
+    let adversarial = if options.adversarial_trials > 0 {
+        eprintln!(
+            "counting instructions of the adversarial search ({} trials × {ADVERSARIAL_STEPS} steps) under callgrind ...",
+            options.adversarial_trials
+        );
+        let mut c = count_adversarial(&binary, &options)?;
+        let outcome = adversarial_outcome(&binary, &options)?;
+        println!(
+            "  adversarial search (callgrind, {} steps): median {}, max {} (trial {}, step {}); {outcome}",
+            c.steps, c.median, c.max, c.max_at.0, c.max_at.1
+        );
+        c.outcome = Some(outcome);
+        Some(c)
+    } else {
+        None
+    };
     let generic =
         match (&model, options.generic_steps) {
             (Some(m), n) if n > 0 => {
@@ -356,7 +376,7 @@ fn bench(args: BenchArgs) -> Result<(), String> {
             _ => None,
         };
     if let Some(path) = &args.json {
-        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "generic": generic, "native": options.native });
+        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "adversarial": adversarial, "generic": generic, "native": options.native });
         let text = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())? + "\n";
         std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))?;
     }
