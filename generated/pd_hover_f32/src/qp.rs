@@ -226,6 +226,9 @@ impl<const NV: usize> BoxQp<NV> {
         let free = self.free;
         let var = |i: usize| free[i % NV].min(NV - 1);
         for i in from..nf {
+            if i >= NV {
+                break;
+            }
             let hi = &h[var(i)];
             let mut j = 0;
             while j + 4 <= i {
@@ -233,29 +236,34 @@ impl<const NV: usize> BoxQp<NV> {
                 let (Some(li), Some(rows)) = (tail.first_mut(), head.get(j..j + 4)) else {
                     break;
                 };
+                let n = j.min(NV);
                 let d = dot4(
-                    &li[..j],
-                    [&rows[0][..j], &rows[1][..j], &rows[2][..j], &rows[3][..j]],
+                    &li[..n],
+                    [&rows[0][..n], &rows[1][..n], &rows[2][..n], &rows[3][..n]],
                 );
                 for c in 0..4 {
                     let lj = &rows[c];
                     let mut s = hi[var(j + c)] - d[c];
-                    for k in j..j + c {
-                        s -= li[k] * lj[k];
+                    for (a, b) in li.iter().zip(lj.iter()).skip(j).take(c) {
+                        s -= a * b;
                     }
-                    li[j + c] = s / lj[j + c];
+                    let pivot = lj.get(j + c).copied().unwrap_or(1.0);
+                    if let Some(x) = li.get_mut(j + c) {
+                        *x = s / pivot;
+                    }
                 }
                 j += 4;
             }
             for j in j..=i {
-                let s = hi[var(j)] - dot(&self.l[i][..j], &self.l[j][..j]);
+                let (ri, rj, n) = (i % NV, j % NV, j.min(NV));
+                let s = hi[var(j)] - dot(&self.l[ri][..n], &self.l[rj][..n]);
                 if j < i {
-                    self.l[i][j] = s / self.l[j][j];
+                    self.l[ri][rj] = s / self.l[rj][rj];
                 } else {
                     if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
                         return Err(QpStatus::NotPositiveDefinite);
                     }
-                    self.l[i][i] = sqrt(s);
+                    self.l[ri][ri] = sqrt(s);
                 }
             }
         }
