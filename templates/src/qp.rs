@@ -255,8 +255,10 @@ impl<const NV: usize> BoxQp<NV> {
                 for c in 0..4 {
                     let lj = &rows[c];
                     let mut s = hi[var(j + c)] - d[c];
-                    for (a, b) in li.iter().zip(lj.iter()).skip(j).take(c) {
-                        s -= a * b;
+                    for k in j..j + c {
+                        if let (Some(a), Some(b)) = (li.get(k), lj.get(k)) {
+                            s -= a * b;
+                        }
                     }
                     // j + c < i < NV: `get` keeps the bounds check (and its panic path) out.
                     let pivot = lj.get(j + c).copied().unwrap_or(1.0);
@@ -267,16 +269,14 @@ impl<const NV: usize> BoxQp<NV> {
                 j += 4;
             }
             for j in j..=i {
-                // (`% NV` and `min(NV)` restate i, j < NV for the optimiser: no bounds checks.)
-                let (ri, rj, n) = (i % NV, j % NV, j.min(NV));
-                let s = hi[var(j)] - dot(&self.l[ri][..n], &self.l[rj][..n]);
+                let s = hi[var(j)] - dot(&self.l[i][..j], &self.l[j][..j]);
                 if j < i {
-                    self.l[ri][rj] = s / self.l[rj][rj];
+                    self.l[i][j] = s / self.l[j][j];
                 } else {
                     if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
                         return Err(QpStatus::NotPositiveDefinite);
                     }
-                    self.l[ri][ri] = sqrt(s);
+                    self.l[i][i] = sqrt(s);
                 }
             }
         }
