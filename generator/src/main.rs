@@ -57,9 +57,12 @@ struct BenchArgs {
     /// Steps per trajectory for the generic solver.
     #[arg(long, default_value_t = 100)]
     generic_steps: usize,
-    /// Count instructions of this many RTI steps under callgrind (0: skip).
+    /// Count instructions of this many RTI steps per trajectory (3 trajectories, as timed) under callgrind (0: skip).
     #[arg(long, default_value_t = 0)]
     instructions: usize,
+    /// Also count the instructions of this many trials of the adversarial search under callgrind (0: skip).
+    #[arg(long, default_value_t = 0)]
+    adversarial: usize,
     /// Build with -C target-cpu=native.
     #[arg(long)]
     native: bool,
@@ -296,6 +299,7 @@ fn bench(args: BenchArgs) -> Result<(), String> {
         seed: args.seed,
         generic_steps: args.generic_steps,
         instruction_steps: args.instructions,
+        adversarial_trials: args.adversarial,
         native: args.native,
         work_dir,
     };
@@ -333,14 +337,31 @@ fn bench(args: BenchArgs) -> Result<(), String> {
     );
     let instructions = if options.instruction_steps > 0 {
         eprintln!(
-            "counting instructions of {} steps under callgrind ...",
+            "counting instructions of {} steps on each of 3 trajectories under callgrind ...",
             options.instruction_steps
         );
         let c = count_instructions(&binary, &options)?;
+        let trajectory = ["sinusoidal", "circular", "spiral"][c.max_at.0.min(2)];
         println!(
-            "  instructions per RTI step (callgrind, {} steps of the circle): median {}, max {}",
-            c.steps, c.median, c.max
+            "  instructions per RTI step (callgrind, {} steps of the scenario): median {}, max {} ({} trajectory, step {})",
+            c.steps, c.median, c.max, trajectory, c.max_at.1
         );
+        Some(c)
+    } else {
+        None
+    };
+    let adversarial = if options.adversarial_trials > 0 {
+        eprintln!(
+            "counting instructions of the adversarial search ({} trials × {ADVERSARIAL_STEPS} steps) under callgrind ...",
+            options.adversarial_trials
+        );
+        let mut c = count_adversarial(&binary, &options)?;
+        let outcome = adversarial_outcome(&binary, &options)?;
+        println!(
+            "  adversarial search (callgrind, {} steps): median {}, max {} (trial {}, step {}); {outcome}",
+            c.steps, c.median, c.max, c.max_at.0, c.max_at.1
+        );
+        c.outcome = Some(outcome);
         Some(c)
     } else {
         None
@@ -359,7 +380,7 @@ fn bench(args: BenchArgs) -> Result<(), String> {
             _ => None,
         };
     if let Some(path) = &args.json {
-        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "generic": generic, "native": options.native });
+        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "adversarial": adversarial, "generic": generic, "native": options.native });
         let text = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())? + "\n";
         std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))?;
     }

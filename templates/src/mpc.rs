@@ -5,7 +5,7 @@
 use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization};
-use crate::{Real, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, U_MAX, U_MIN};
+use crate::{Real, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, TRUST_BOUND, U_MAX, U_MIN};
 
 /// What happened in a solve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -83,6 +83,12 @@ impl Default for Mpc {
 #[inline]
 fn all_finite(values: &[Real]) -> bool {
     values.iter().all(|v| v.is_finite())
+}
+
+/// |xᵢ| ≤ `TRUST_BOUND[i]` for every state (false for a NaN).
+#[inline]
+fn within_trust_region(x: &[Real; NX]) -> bool {
+    x.iter().zip(&TRUST_BOUND).all(|(v, b)| v.abs() <= *b)
 }
 
 #[inline]
@@ -191,10 +197,17 @@ impl Mpc {
     }
 
     /// (Fₖ, Aₖ, Bₖ) at the guess and the defects cₖ = Fₖ − x̄ₖ₊₁; false if anything is not finite.
+    /// If a predicted state x̄₁..x̄_N has left the trust region (|x̄ᵢ| ≤ `TRUST_BOUND[i]`), the
+    /// guess's states are first replaced by the rollout of its inputs from x̄₀, x̄ₖ₊₁ = Fₖ (all
+    /// defects zero): at no extra cost, since Fₖ is computed here anyway.
     fn linearize(&mut self) -> bool {
+        let rollout = !self.xs[1..].iter().all(within_trust_region);
         let mut finite = true;
         for k in 0..N {
             let (next, a, b) = discrete_linearization(&self.xs[k], &self.us[k]);
+            if rollout {
+                self.xs[k + 1] = next;
+            }
             for i in 0..NX {
                 self.c[k][i] = next[i] - self.xs[k + 1][i];
             }
@@ -656,6 +669,29 @@ mod tests {
             .planned_inputs()
             .iter()
             .all(|u| u[0] <= U_MAX[0] && u[0] >= U_MIN[0]));
+    }
+
+    #[test]
+    fn a_guess_outside_the_trust_region_is_rolled_out() {
+        // x̄₅ beyond TRUST_BOUND[0]: prepare replaces the states by the rollout of the inputs.
+        let us = [[0.3]; N];
+        let mut xs = [[0.1, -0.2]; N + 1];
+        xs[5][0] = 2.0 * TRUST_BOUND[0];
+        let mut mpc = Mpc::new();
+        assert!(mpc.set_guess(&xs, &us));
+        assert_eq!(mpc.prepare(&reference(0.5)), Status::Solved);
+        let rolled = mpc.predicted_states();
+        assert_eq!(rolled[0], xs[0]);
+        for k in 0..N {
+            assert_eq!(rolled[k + 1], discrete_dynamics(&rolled[k], &us[k]), "stage {k}");
+            assert!(mpc.c[k].iter().all(|c| *c == 0.0));
+        }
+        // Inside the trust region the guess is kept (a multiple-shooting iterate with defects).
+        xs[5][0] = 0.5 * TRUST_BOUND[0];
+        assert!(mpc.set_guess(&xs, &us));
+        assert_eq!(mpc.prepare(&reference(0.5)), Status::Solved);
+        assert_eq!(*mpc.predicted_states(), xs);
+        assert!(mpc.c[0].iter().any(|c| *c != 0.0));
     }
 
     #[test]

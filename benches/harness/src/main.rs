@@ -4,8 +4,10 @@
 //!
 //! `harness [--steps N] [--seed S] [--name NAME]` prints one JSON object with
 //! the timings of N RTI steps on each of the paper's 3 trajectories (pinned to
-//! the last CPU core when possible); `harness --callgrind N` runs N steps
-//! through `measured_step` for instruction counting under callgrind.
+//! the last CPU core when possible); `harness --callgrind N` runs N steps of each trajectory
+//! through `measured_step` for instruction counting under callgrind;
+//! `harness --callgrind-adversarial N` runs the adversarial search's N trials
+//! (`scenario::run_adversarial`) the same way.
 
 // `Real` may be f32 or f64, so `as f64` casts are needed in general; `is_multiple_of`
 // is newer than the workspace's minimum Rust.
@@ -34,6 +36,14 @@ fn main() {
         }
     };
     let seed = number("--seed", 1);
+    if let Some(n) = arg(&args, "--callgrind-adversarial") {
+        let (s, it) = scenario::run_adversarial(n.parse().unwrap_or(100), seed);
+        println!(
+            "{{\"statuses\": {{\"solved\": {}, \"iteration_cap\": {}, \"hessian_regularised\": {}, \"invalid_input\": {}, \"numerical_failure\": {}}}, \"max_qp_iterations\": {it}}}",
+            s[0], s[1], s[2], s[3], s[4]
+        );
+        return;
+    }
     if let Some(n) = arg(&args, "--callgrind") {
         let steps = n.parse().unwrap_or(300);
         scenario::run_for_instruction_count(steps, seed);

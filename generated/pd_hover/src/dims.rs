@@ -49,5 +49,22 @@ pub const INPUT_DELAY: [Real; NU] = [0.0, 0.0, 0.0, 0.0];
 pub const INPUT_DELAY_SAMPLES: [usize; NU] = [0, 0, 0, 0];
 /// Hard cap on active-set iterations per QP.
 pub const MAX_QP_ITERATIONS: usize = 200;
+/// Trust region of the guess, |x̄ᵢ| ≤ TRUST_BOUND[i] (`Real::INFINITY`: none): twice the
+/// generator's envelope on roll, pitch and the body rates. A guess that leaves it is replaced by
+/// the rollout of its inputs in `prepare` (docs/mpc.md).
+pub const TRUST_BOUND: [Real; NX] = [
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+    1.2,
+    1.2,
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+    6.0,
+    6.0,
+    6.0,
+];
 /// Added to the diagonal of the condensed Hessian.
 pub const REGULARISATION: Real = 0.000000001;

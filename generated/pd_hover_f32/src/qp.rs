@@ -56,6 +56,10 @@ pub struct BoxQp<const NV: usize> {
     state: [Bound; NV],
     rhs: [Real; NV],
     target: [Real; NV],
+    /// H_{·,W} v_W (H's columns of the working set times their bound values),
+    /// kept up to date as variables are fixed and freed.
+    fixed_gradient: [Real; NV],
+    work: [Real; NV],
 }
 impl<const NV: usize> Default for BoxQp<NV> {
     fn default() -> Self {
@@ -107,22 +111,12 @@ fn dot4(a: &[Real], b: [&[Real]; 4]) -> [Real; 4] {
     }
     out
 }
-/// ½ vᵀ H v + gᵀ v
-fn objective<const NV: usize>(
-    h: &[[Real; NV]; NV],
-    g: &[Real; NV],
-    v: &[Real; NV],
-) -> Real {
-    let mut f = 0.0;
-    for i in 0..NV {
-        f += v[i] * (0.5 * dot(&h[i], v) + g[i]);
-    }
-    f
-}
 /// Violated bounds that trigger a projection restart.
-const RESTART_VIOLATIONS: usize = 4;
-/// Projection restarts per solve (each costs a refactorisation).
-const MAX_RESTARTS: usize = 3;
+const RESTART_VIOLATIONS: usize = 2;
+/// Projection restarts per solve (each costs a partial refactorisation).
+const MAX_RESTARTS: usize = 30;
+/// A fresh factorisation orders the free variables last stage first.
+const REVERSED_ORDER: bool = true;
 /// Relative pivot tolerance of the factorisation.
 const PIVOT_TOLERANCE: Real = 1e3 * Real::EPSILON;
 impl<const NV: usize> BoxQp<NV> {
@@ -135,6 +129,8 @@ impl<const NV: usize> BoxQp<NV> {
             state: [Bound::Free; NV],
             rhs: [0.0; NV],
             target: [0.0; NV],
+            fixed_gradient: [0.0; NV],
+            work: [0.0; NV],
         }
     }
     /// Free variable number `i` (factor order), clamped so that indexing with
@@ -173,16 +169,66 @@ impl<const NV: usize> BoxQp<NV> {
     /// Fails if a pivot is ≤ tolerance · H_ii (H not numerically positive definite).
     pub fn factorize(&mut self, h: &[[Real; NV]; NV]) -> Result<(), QpStatus> {
         self.nf = 0;
-        for i in 0..NV {
+        for k in 0..NV {
+            let i = if REVERSED_ORDER { NV - 1 - k } else { k };
             if self.state[i] == Bound::Free {
                 self.free[self.nf % NV] = i;
                 self.nf += 1;
             }
         }
+        self.factor_rows(h, 0)
+    }
+    /// Drop the variables that are no longer free from the factor, keeping the
+    /// order of the others. The rows before the first dropped position are
+    /// unchanged (the leading block of H_FF is), so only the rows from there
+    /// on are recomputed.
+    fn drop_fixed(&mut self, h: &[[Real; NV]; NV]) -> Result<(), QpStatus> {
+        let nf = self.free_count();
+        let (mut by_rotations, mut dropped, mut first) = (0usize, 0usize, nf);
+        for i in 0..nf {
+            if self.state[self.var(i)] != Bound::Free {
+                by_rotations += (nf * nf - i * i) / 2 + 3 * (nf - i) * (nf - i);
+                dropped += 1;
+                first = first.min(i);
+            }
+        }
+        let kept = nf - dropped;
+        if by_rotations < (kept * kept * kept).saturating_sub(first * first * first) / 6
+        {
+            for i in (0..nf).rev() {
+                if self.state[self.var(i)] != Bound::Free {
+                    self.remove(i);
+                }
+            }
+            return Ok(());
+        }
+        let mut first = nf;
+        let mut kept = 0;
+        for i in 0..nf {
+            let var = self.var(i);
+            if self.state[var] == Bound::Free {
+                self.free[kept % NV] = var;
+                kept += 1;
+            } else if first == nf {
+                first = i;
+            }
+        }
+        self.nf = kept;
+        self.factor_rows(h, first)
+    }
+    /// Rows `from..nf` of the Cholesky factor of H_FF, rows before `from` given.
+    fn factor_rows(
+        &mut self,
+        h: &[[Real; NV]; NV],
+        from: usize,
+    ) -> Result<(), QpStatus> {
         let nf = self.nf.min(NV);
         let free = self.free;
         let var = |i: usize| free[i % NV].min(NV - 1);
-        for i in 0..nf {
+        for i in from..nf {
+            if i >= NV {
+                break;
+            }
             let hi = &h[var(i)];
             let mut j = 0;
             while j + 4 <= i {
@@ -190,17 +236,23 @@ impl<const NV: usize> BoxQp<NV> {
                 let (Some(li), Some(rows)) = (tail.first_mut(), head.get(j..j + 4)) else {
                     break;
                 };
+                let n = j.min(NV);
                 let d = dot4(
-                    &li[..j],
-                    [&rows[0][..j], &rows[1][..j], &rows[2][..j], &rows[3][..j]],
+                    &li[..n],
+                    [&rows[0][..n], &rows[1][..n], &rows[2][..n], &rows[3][..n]],
                 );
                 for c in 0..4 {
                     let lj = &rows[c];
                     let mut s = hi[var(j + c)] - d[c];
                     for k in j..j + c {
-                        s -= li[k] * lj[k];
+                        if let (Some(a), Some(b)) = (li.get(k), lj.get(k)) {
+                            s -= a * b;
+                        }
                     }
-                    li[j + c] = s / lj[j + c];
+                    let pivot = lj.get(j + c).copied().unwrap_or(1.0);
+                    if let Some(x) = li.get_mut(j + c) {
+                        *x = s / pivot;
+                    }
                 }
                 j += 4;
             }
@@ -301,7 +353,6 @@ impl<const NV: usize> BoxQp<NV> {
     fn try_projection_restart(
         &mut self,
         h: &[[Real; NV]; NV],
-        g: &[Real; NV],
         lo: &[Real; NV],
         hi: &[Real; NV],
         v: &mut [Real; NV],
@@ -315,24 +366,53 @@ impl<const NV: usize> BoxQp<NV> {
         if violations < RESTART_VIOLATIONS {
             return false;
         }
-        let mut projected = *v;
-        for i in 0..self.free_count() {
+        let nf = self.free_count();
+        for i in 0..nf {
             let var = self.var(i);
-            projected[var] = self.rhs[i].max(lo[var]).min(hi[var]);
+            self.target[i] = self.rhs[i].max(lo[var]).min(hi[var]) - self.rhs[i];
         }
-        if objective(h, g, &projected) > objective(h, g, v) {
+        let at_projection = self.factor_norm();
+        for i in 0..nf {
+            self.target[i] = v[self.var(i)] - self.rhs[i];
+        }
+        if !(at_projection < self.factor_norm()) {
             return false;
         }
-        for i in 0..self.free_count() {
+        for i in 0..nf {
             let var = self.var(i);
-            if self.rhs[i] < lo[var] {
-                self.state[var] = Bound::Lower;
+            let bound = if self.rhs[i] < lo[var] {
+                Bound::Lower
             } else if self.rhs[i] > hi[var] {
-                self.state[var] = Bound::Upper;
+                Bound::Upper
+            } else {
+                v[var] = self.rhs[i];
+                continue;
+            };
+            v[var] = if bound == Bound::Lower { lo[var] } else { hi[var] };
+            self.state[var] = bound;
+            self.add_fixed(h, var, v[var]);
+        }
+        true
+    }
+    /// ‖Lᵀ z‖² for z = target[..nf] (factor order).
+    fn factor_norm(&mut self) -> Real {
+        let nf = self.free_count();
+        self.work[..nf].fill(0.0);
+        for i in 0..nf {
+            let zi = self.target[i];
+            for (w, l) in self.work[..i + 1].iter_mut().zip(&self.l[i][..i + 1]) {
+                *w += l * zi;
             }
         }
-        *v = projected;
-        true
+        dot(&self.work[..nf], &self.work[..nf])
+    }
+    /// `fixed_gradient` += H_{·,var} value (H is symmetric: its row `var`).
+    fn add_fixed(&mut self, h: &[[Real; NV]; NV], var: usize, value: Real) {
+        if value != 0.0 {
+            for (w, hv) in self.fixed_gradient.iter_mut().zip(&h[var % NV]) {
+                *w += hv * value;
+            }
+        }
     }
     /// Solve from `v` (clamped into the box) with the current working set;
     /// [`Self::factorize`] must have been called for it with the same `h`.
@@ -353,23 +433,26 @@ impl<const NV: usize> BoxQp<NV> {
                 Bound::Free => v[i].max(lo[i]).min(hi[i]),
             };
         }
+        self.fixed_gradient = [0.0; NV];
+        for j in 0..NV {
+            if self.state[j] != Bound::Free {
+                self.add_fixed(h, j, v[j]);
+            }
+        }
         let scale = g.iter().fold(1.0 as Real, |m, x| m.max(x.abs()));
         let tolerance = 10.0 * Real::EPSILON * scale;
         let mut iterations = 0;
         let mut restarts = 0;
         while iterations < max_iterations {
             iterations += 1;
-            for j in 0..NV {
-                self.target[j] = if self.state[j] == Bound::Free { 0.0 } else { v[j] };
-            }
             for i in 0..self.free_count() {
                 let var = self.var(i);
-                self.rhs[i] = -(g[var] + dot(&h[var], &self.target));
+                self.rhs[i] = -(g[var] + self.fixed_gradient[var]);
             }
             self.solve_factored();
-            if restarts < MAX_RESTARTS && self.try_projection_restart(h, g, lo, hi, v) {
+            if restarts < MAX_RESTARTS && self.try_projection_restart(h, lo, hi, v) {
                 restarts += 1;
-                if self.factorize(h).is_err() {
+                if self.drop_fixed(h).is_err() {
                     return QpResult {
                         status: QpStatus::NotPositiveDefinite,
                         iterations,
@@ -403,6 +486,7 @@ impl<const NV: usize> BoxQp<NV> {
                 let var = self.var(p);
                 v[var] = if bound == Bound::Lower { lo[var] } else { hi[var] };
                 self.state[var] = bound;
+                self.add_fixed(h, var, v[var]);
                 self.remove(p);
                 continue;
             }
@@ -421,6 +505,7 @@ impl<const NV: usize> BoxQp<NV> {
                         };
                     }
                     self.state[j] = Bound::Free;
+                    self.add_fixed(h, j, -v[j]);
                     released += 1;
                 }
             }

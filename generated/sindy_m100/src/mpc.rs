@@ -9,8 +9,8 @@ use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization};
 use crate::{
-    Real, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, U_MAX,
-    U_MIN,
+    Real, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION,
+    TRUST_BOUND, U_MAX, U_MIN,
 };
 /// What happened in a solve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -83,6 +83,11 @@ impl Default for Mpc {
 #[inline]
 fn all_finite(values: &[Real]) -> bool {
     values.iter().all(|v| v.is_finite())
+}
+/// |xᵢ| ≤ `TRUST_BOUND[i]` for every state (false for a NaN).
+#[inline]
+fn within_trust_region(x: &[Real; NX]) -> bool {
+    x.iter().zip(&TRUST_BOUND).all(|(v, b)| v.abs() <= *b)
 }
 #[inline]
 #[allow(clippy::manual_clamp)]
@@ -177,10 +182,17 @@ impl Mpc {
         }
     }
     /// (Fₖ, Aₖ, Bₖ) at the guess and the defects cₖ = Fₖ − x̄ₖ₊₁; false if anything is not finite.
+    /// If a predicted state x̄₁..x̄_N has left the trust region (|x̄ᵢ| ≤ `TRUST_BOUND[i]`), the
+    /// guess's states are first replaced by the rollout of its inputs from x̄₀, x̄ₖ₊₁ = Fₖ (all
+    /// defects zero): at no extra cost, since Fₖ is computed here anyway.
     fn linearize(&mut self) -> bool {
+        let rollout = !self.xs[1..].iter().all(within_trust_region);
         let mut finite = true;
         for k in 0..N {
             let (next, a, b) = discrete_linearization(&self.xs[k], &self.us[k]);
+            if rollout {
+                self.xs[k + 1] = next;
+            }
             for i in 0..NX {
                 self.c[k][i] = next[i] - self.xs[k + 1][i];
             }

@@ -28,6 +28,11 @@ pub struct InstructionCounts {
     pub steps: usize,
     pub median: u64,
     pub max: u64,
+    /// Where the largest count was: (trajectory 0..3, step), or (trial, step) for the adversarial search.
+    pub max_at: (usize, usize),
+    /// The adversarial search's status counts and largest QP iteration count.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outcome: Option<serde_json::Value>,
 }
 
 /// The crate's package name, checked to be a uavgen-generated crate.
@@ -105,6 +110,48 @@ pub fn run_harness(binary: &Path, name: &str, options: &BenchOptions) -> Result<
 /// Instructions of each RTI step under callgrind (`--dump-after` on the
 /// harness's `measured_step`, collection only inside it).
 pub fn count_instructions(binary: &Path, options: &BenchOptions) -> Result<InstructionCounts, String> {
+    let steps = options.instruction_steps.to_string();
+    count_calls(binary, options, &["--callgrind", &steps], options.instruction_steps)
+}
+
+/// Steps measured per trial of the adversarial search (`ADVERSARIAL_STEPS` in benches/scenario.rs).
+pub const ADVERSARIAL_STEPS: usize = 8;
+
+/// Instructions of each measured step of the adversarial search's `options.adversarial_trials`
+/// trials; `max_at` is (trial, step).
+pub fn count_adversarial(binary: &Path, options: &BenchOptions) -> Result<InstructionCounts, String> {
+    let trials = options.adversarial_trials.to_string();
+    count_calls(
+        binary,
+        options,
+        &["--callgrind-adversarial", &trials],
+        ADVERSARIAL_STEPS,
+    )
+}
+
+/// The status counts and largest QP iteration count of the adversarial search (a run without callgrind).
+pub fn adversarial_outcome(binary: &Path, options: &BenchOptions) -> Result<serde_json::Value, String> {
+    let out = Command::new(binary)
+        .args([
+            "--callgrind-adversarial",
+            &options.adversarial_trials.to_string(),
+            "--seed",
+            &options.seed.to_string(),
+        ])
+        .output()
+        .map_err(|e| format!("cannot run the harness: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.trim()).map_err(|e| format!("harness output {text:?}: {e}"))
+}
+
+/// Run the harness with `harness_args` under callgrind, one dump per `measured_step` call;
+/// calls are grouped `group` at a time for `max_at`.
+fn count_calls(
+    binary: &Path,
+    options: &BenchOptions,
+    harness_args: &[&str],
+    group: usize,
+) -> Result<InstructionCounts, String> {
     let dir = options.work_dir.join("callgrind");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -117,12 +164,8 @@ pub fn count_instructions(binary: &Path, options: &BenchOptions) -> Result<Instr
             "--dump-after=*measured_step",
         ])
         .arg(binary)
-        .args([
-            "--callgrind",
-            &options.instruction_steps.to_string(),
-            "--seed",
-            &options.seed.to_string(),
-        ])
+        .args(harness_args)
+        .args(["--seed", &options.seed.to_string()])
         .output()
         .map_err(|e| format!("cannot run valgrind (install it for instruction counts): {e}"))?;
     if !out.status.success() {
@@ -131,12 +174,18 @@ pub fn count_instructions(binary: &Path, options: &BenchOptions) -> Result<Instr
     let mut counts = Vec::new();
     for entry in std::fs::read_dir(&dir).map_err(|e| e.to_string())? {
         let path = entry.map_err(|e| e.to_string())?.path();
+        // Dump number K (cg.out.K) follows the K-th call.
+        let call: usize = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .and_then(|e| e.parse().ok())
+            .unwrap_or(0);
         let text = std::fs::read_to_string(&path).map_err(|e| e.to_string())?;
         // Each dump after a call holds that call's cost in its "summary:" line.
         if let Some(n) = text.lines().find_map(|l| l.strip_prefix("summary: ")) {
             let n: u64 = n.split_whitespace().next().and_then(|v| v.parse().ok()).unwrap_or(0);
-            if n > 0 {
-                counts.push(n);
+            if n > 0 && call > 0 {
+                counts.push((n, call));
             }
         }
     }
@@ -144,9 +193,13 @@ pub fn count_instructions(binary: &Path, options: &BenchOptions) -> Result<Instr
         return Err("callgrind recorded no RTI step".into());
     }
     counts.sort_unstable();
+    let (max, call) = counts[counts.len() - 1];
+    let steps = group.max(1);
     Ok(InstructionCounts {
         steps: counts.len(),
-        median: counts[counts.len() / 2],
-        max: counts[counts.len() - 1],
+        median: counts[counts.len() / 2].0,
+        max,
+        max_at: ((call - 1) / steps, (call - 1) % steps),
+        outcome: None,
     })
 }

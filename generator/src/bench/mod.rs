@@ -13,7 +13,10 @@ mod harness;
 
 pub use dims::{read as read_crate_dims, CrateDims};
 pub use generic::{run_generic, GenericTimings};
-pub use harness::{build_harness, count_instructions, run_harness, HarnessResult, InstructionCounts};
+pub use harness::{
+    adversarial_outcome, build_harness, count_adversarial, count_instructions, run_harness, HarnessResult,
+    InstructionCounts, ADVERSARIAL_STEPS,
+};
 
 /// Options of `uavgen bench`.
 #[derive(Clone, Debug)]
@@ -25,6 +28,8 @@ pub struct BenchOptions {
     pub generic_steps: usize,
     /// Steps counted under callgrind; 0 skips it.
     pub instruction_steps: usize,
+    /// Trials of the adversarial search counted under callgrind; 0 skips it.
+    pub adversarial_trials: usize,
     /// Build with `-C target-cpu=native`.
     pub native: bool,
     /// Where the scratch crate and its target directory live.

@@ -31,6 +31,14 @@ pub fn dims_values(
         let l = Literal::usize_unsuffixed((d * options.rate_hz).round() as usize);
         quote!(#l)
     });
+    // The guess's trust region: unbounded states are `Real::INFINITY`.
+    let trust = options.envelope.trust_bounds(&ir.state_names).into_iter().map(|b| {
+        if b.is_finite() {
+            float_literal(b, options.float)
+        } else {
+            quote!(Real::INFINITY)
+        }
+    });
     BTreeMap::from([
         ("NX", lit(ir.nx)),
         ("NU", lit(ir.nu)),
@@ -45,6 +53,7 @@ pub fn dims_values(
         ("INPUT_DELAY", array(delays)),
         ("INPUT_DELAY_SAMPLES", quote!([#(#delay_samples),*])),
         ("MAX_QP_ITERATIONS", lit(mpc.max_qp_iterations)),
+        ("TRUST_BOUND", quote!([#(#trust),*])),
         ("REGULARISATION", float_literal(mpc.regularisation, options.float)),
     ])
 }

@@ -10,6 +10,9 @@ use std::f64::consts::PI;
 /// model's `corrections` have their own: `flight_time` ranges over
 /// 0..`flight_time` s, `<input>_lagged` over the bounds of `<input>`, and `<state>_dot_lagged`
 /// over ±`acceleration` (vx, vy, vz) or ±`angular_acceleration` (the rates).
+/// The guess's trust region is this many times the envelope ([`Envelope::trust_bounds`]).
+pub const TRUST_FACTOR: f64 = 2.0;
+
 #[derive(Clone, Debug)]
 pub struct Envelope {
     pub position: f64,
@@ -79,6 +82,22 @@ impl Envelope {
             "u_yaw_rate" => self.inputs[3],
             _ => self.default_bound,
         }
+    }
+
+    /// The trust region of the MPC's guess: |x̄ᵢ| ≤ bound for each state, `f64::INFINITY` where
+    /// there is none. Twice the envelope on the attitude angles `roll`, `pitch` and on the body
+    /// rates: there the models' rotational dynamics (Euler angles, singular at pitch = ±π/2) and
+    /// the substep rule are trusted. When a guess leaves it, the MPC rolls the guess out with the
+    /// model (docs/mpc.md, "The guess's trust region").
+    pub fn trust_bounds(&self, states: &[String]) -> Vec<f64> {
+        states
+            .iter()
+            .map(|name| match name.as_str() {
+                "roll" | "pitch" => TRUST_FACTOR * self.tilt,
+                "roll_rate" | "pitch_rate" | "yaw_rate" => TRUST_FACTOR * self.angular_rate,
+                _ => f64::INFINITY,
+            })
+            .collect()
     }
 
     /// The hover point (all zero) followed by `samples` uniform random points,

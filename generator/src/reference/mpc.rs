@@ -5,7 +5,7 @@
 //! a primal active set), so the two can be compared iterate by iterate.
 
 use super::linearize::discrete_linearization;
-use crate::discretize::discrete_step;
+use crate::discretize::{discrete_step, Envelope};
 use crate::ir::ModelIr;
 use crate::MpcOptions;
 use clarabel::algebra::CscMatrix;
@@ -114,6 +114,9 @@ pub struct GenericMpc {
     x_guess: Vec<Vec<f64>>,
     /// ū₀..ū_{N−1}
     u_guess: Vec<Vec<f64>>,
+    /// The guess's trust region, |x̄ᵢ| ≤ trust[i] ([`Envelope::trust_bounds`] of the default
+    /// envelope, as in the generated crates).
+    trust: Vec<f64>,
 }
 
 impl GenericMpc {
@@ -143,6 +146,7 @@ impl GenericMpc {
         Self {
             x_guess: vec![vec![0.0; nx]; n + 1],
             u_guess: vec![vec![0.0; nu]; n],
+            trust: Envelope::default().trust_bounds(&ir.state_names),
             ir,
             problem,
         }
@@ -241,9 +245,19 @@ impl GenericMpc {
         self.check_inputs(x0, reference)?;
         let (nx, nu, n) = (self.ir.nx, self.ir.nu, self.problem.horizon);
 
-        let lin = self.linearize()?;
-        let qp = self.build_qp(&lin, x0, reference);
-        let (w, qp_iterations) = solve_qp(&qp)?;
+        // A guess outside the trust region is replaced by the rollout of its inputs (done
+        // inside `linearize`); on any error below the guess is restored.
+        let saved = self.x_guess.clone();
+        let solved = self
+            .linearize()
+            .and_then(|lin| solve_qp(&self.build_qp(&lin, x0, reference)));
+        let (w, qp_iterations) = match solved {
+            Ok(solution) => solution,
+            Err(e) => {
+                self.x_guess = saved;
+                return Err(e);
+            }
+        };
 
         // The full step: ūₖ += δuₖ, x̄ₖ += δxₖ (x̄₀ = x₀ exactly).
         for k in 0..n {
@@ -296,8 +310,14 @@ impl GenericMpc {
         Ok(())
     }
 
-    /// (Fₖ, Aₖ, Bₖ) = discrete_linearization(x̄ₖ, ūₖ), cₖ = Fₖ − x̄ₖ₊₁.
-    fn linearize(&self) -> Result<Linearization, ReferenceError> {
+    /// (Fₖ, Aₖ, Bₖ) = discrete_linearization(x̄ₖ, ūₖ), cₖ = Fₖ − x̄ₖ₊₁. If a predicted state
+    /// x̄₁..x̄_N is outside the trust region, the states are first replaced by the rollout
+    /// x̄ₖ₊₁ = Fₖ from x̄₀ (all defects zero), as the generated solver does.
+    fn linearize(&mut self) -> Result<Linearization, ReferenceError> {
+        let trust = &self.trust;
+        let rollout = !self.x_guess[1..]
+            .iter()
+            .all(|x| x.iter().zip(trust).all(|(v, b)| v.abs() <= *b));
         let p = &self.problem;
         let mut lin = Linearization {
             a: vec![],
@@ -306,6 +326,9 @@ impl GenericMpc {
         };
         for k in 0..p.horizon {
             let (f, a, b) = discrete_linearization(&self.ir, &self.x_guess[k], &self.u_guess[k], p.dt, p.substeps);
+            if rollout {
+                self.x_guess[k + 1].copy_from_slice(&f);
+            }
             let c: Vec<f64> = f.iter().zip(&self.x_guess[k + 1]).map(|(fi, xi)| fi - xi).collect();
             if !(c.iter().all(|v| v.is_finite()) && a.iter().all(|v| v.is_finite()) && b.iter().all(|v| v.is_finite()))
             {
