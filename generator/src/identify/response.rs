@@ -110,32 +110,7 @@ impl InputResponse {
 /// (1 − a) v_m, a = e^{−Δt/τ}, and the average v_m + (s_m − v_m)(τ/Δt)(1 − a). Exact for
 /// zero-order-hold inputs.
 pub fn interval_average(u: &[f64], dt: f64, delay: f64, lag: Option<f64>) -> Vec<f64> {
-    let v: Vec<f64> = if delay <= 0.0 {
-        u.to_vec()
-    } else {
-        let samples = delay / dt;
-        let n = samples.floor() as usize;
-        let alpha = samples - n as f64;
-        let at = |m: usize, back: usize| u[m.saturating_sub(back)];
-        (0..u.len())
-            .map(|m| (1.0 - alpha) * at(m, n) + alpha * at(m, n + 1))
-            .collect()
-    };
-    match lag {
-        None => v,
-        Some(tau) => {
-            let a = (-dt / tau).exp();
-            let k = -(tau / dt) * (-dt / tau).exp_m1();
-            let mut s = v.first().copied().unwrap_or(0.0);
-            v.iter()
-                .map(|&vm| {
-                    let avg = vm + (s - vm) * k;
-                    s = a * s + (1.0 - a) * vm;
-                    avg
-                })
-                .collect()
-        }
-    }
+    crate::ir::corrections::channel_average(u, dt, delay, lag)
 }
 
 /// The scan's grid and rules (see the module documentation).

@@ -123,45 +123,7 @@ impl InputTransform {
     }
 }
 
-/// The delayed input, interval averages (see the module documentation).
-pub fn delayed(u: &[f64], dt: f64, delay: f64) -> Vec<f64> {
-    if delay <= 0.0 {
-        return u.to_vec();
-    }
-    let samples = delay / dt;
-    let n = samples.floor() as usize;
-    let alpha = samples - n as f64;
-    let at = |m: usize, back: usize| u[m.saturating_sub(back)];
-    (0..u.len())
-        .map(|m| (1.0 - alpha) * at(m, n) + alpha * at(m, n + 1))
-        .collect()
-}
-
-/// The lag state s_m at the sample instants for the zero-order-hold input v (s_0 = v_0).
-pub fn lag_states(v: &[f64], dt: f64, tau: f64) -> Vec<f64> {
-    let a = (-dt / tau).exp();
-    let mut s = Vec::with_capacity(v.len());
-    let mut cur = v.first().copied().unwrap_or(0.0);
-    for &vm in v {
-        s.push(cur);
-        cur = a * cur + (1.0 - a) * vm;
-    }
-    s
-}
-
-/// What the model sees of one channel over each interval: delayed, then lagged (interval average).
-pub fn channel_average(u: &[f64], dt: f64, delay: f64, lag: Option<f64>) -> Vec<f64> {
-    let v = delayed(u, dt, delay);
-    match lag {
-        None => v,
-        Some(tau) => {
-            let s = lag_states(&v, dt, tau);
-            // (τ/Δt)(1 − a) = −(τ/Δt) expm1(−Δt/τ), accurate for small Δt/τ.
-            let k = -(tau / dt) * (-dt / tau).exp_m1();
-            v.iter().zip(&s).map(|(vm, sm)| vm + (sm - vm) * k).collect()
-        }
-    }
-}
+pub use crate::ir::corrections::{channel_average, delayed, lag_states};
 
 /// The lag of a row b that goes linearly from b0_m to b1_m over sample m (first-order hold):
 /// the lag states ℓ_m at the samples (ℓ₀ = b0₀) and, per sample, the interval average of ℓ minus
