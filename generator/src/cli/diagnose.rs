@@ -80,7 +80,7 @@ pub struct DiagnoseArgs {
     stale: uavgen::logs::StalePolicy,
     /// Run the protocol on withheld effects instead (docs/diagnosis.md): the simulator flies nominal
     /// logs and logs with each plant effect; a model identified from the nominal ones is diagnosed
-    /// against each. Prints the results; with --out, writes selfcheck.md and selfcheck.json there.
+    /// against each. Prints the results and writes selfcheck.md and selfcheck.json into --out.
     #[arg(long, conflicts_with_all = ["model", "logs", "holdout"])]
     self_check: bool,
     /// Self-check: only every effect at realistic magnitude, one pair and nominal logs (what CI runs).
