@@ -736,18 +736,17 @@ fn identify_input_delay_none_keeps_the_inputs_as_logged() {
     }
 }
 
-/// The M100 runs 1–5 (../shared): the default PD identification writes a model that passes its
-/// own horizon check and carries the delays it found. Skipped, visibly, without ../shared.
-#[test]
-fn identify_defaults_on_the_m100_logs() {
+/// `uavgen identify --method METHOD` with default options on the M100 runs 1–5 (../shared): the
+/// command's output and the model file (in the returned directory); None (SKIPPED) without them.
+fn identify_m100_defaults(method: &str) -> Option<(std::process::Output, std::path::PathBuf, tempfile::TempDir)> {
     let m = repo().join("../shared/flights/m100");
     if !m.join("m100_run1.csv").exists() {
         eprintln!("SKIPPED: {} is absent", m.display());
-        return;
+        return None;
     }
     let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("pd.json");
-    let mut args = vec!["identify".to_string(), "--method".into(), "pd".into()];
+    let out = tmp.path().join(format!("{method}.json"));
+    let mut args = vec!["identify".to_string(), "--method".into(), method.into()];
     for r in 1..=5 {
         args.extend([
             "--log".to_string(),
@@ -756,7 +755,16 @@ fn identify_defaults_on_the_m100_logs() {
     }
     args.extend(["--out".to_string(), out.display().to_string()]);
     let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-    let o = uavgen(&refs);
+    Some((uavgen(&refs), out, tmp))
+}
+
+/// The M100 runs 1–5 (../shared): the default PD identification writes a model that passes its
+/// own horizon check and carries the delays it found. Skipped, visibly, without ../shared.
+#[test]
+fn identify_defaults_on_the_m100_logs() {
+    let Some((o, out, _tmp)) = identify_m100_defaults("pd") else {
+        return;
+    };
     let err = stderr(&o);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("stayed bounded"), "{err}");
@@ -773,23 +781,9 @@ fn identify_defaults_on_the_m100_logs() {
 #[test]
 #[ignore = "known gap: the default SINDy identification of the M100 runs 1-5 fails its horizon check (docs/identification.md)"]
 fn identify_sindy_defaults_on_the_m100_logs() {
-    let m = repo().join("../shared/flights/m100");
-    if !m.join("m100_run1.csv").exists() {
-        eprintln!("SKIPPED: {} is absent", m.display());
+    let Some((o, _out, _tmp)) = identify_m100_defaults("sindy") else {
         return;
-    }
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("sindy.json");
-    let mut args = vec!["identify".to_string(), "--method".into(), "sindy".into()];
-    for r in 1..=5 {
-        args.extend([
-            "--log".to_string(),
-            m.join(format!("m100_run{r}.csv")).display().to_string(),
-        ]);
-    }
-    args.extend(["--out".to_string(), out.display().to_string()]);
-    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-    let o = uavgen(&refs);
+    };
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("stayed bounded"), "{}", stderr(&o));
 }

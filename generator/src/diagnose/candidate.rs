@@ -335,6 +335,38 @@ fn roles(p: &Problem, n: usize) -> Vec<Vec<Role>> {
         .collect()
 }
 
+/// The model `state` describes with the input transform `tr`: per fit, the (training, held-out)
+/// sums of its residuals and, with `keep`, the residuals themselves (per fit, per segment; empty
+/// for segments the fit does not use).
+pub(crate) fn under(p: &Problem, state: &State, tr: &InputTransform, keep: bool) -> (Vec<(Sums, Sums)>, After) {
+    let segs = p.data.variant(state.destale);
+    let role = roles(p, segs.len());
+    let mut sums = vec![(Sums::default(), Sums::default()); p.fits.len()];
+    let mut after: After = vec![vec![Vec::new(); segs.len()]; p.fits.len()];
+    for (s, seg) in segs.iter().enumerate() {
+        if role.iter().all(|r| r[s] == Role::None) {
+            continue;
+        }
+        let fs = seen_f(seg, p.base, tr);
+        let d = design_from(seg, &fs, &p.ctx, &state.linear);
+        for (i, th) in state.theta.iter().enumerate() {
+            if role[i][s] == Role::None {
+                continue;
+            }
+            let res = d.residual(&state.linear, th);
+            let one = sums_masked(std::slice::from_ref(&res), &[0], std::slice::from_ref(&p.mask[s]));
+            match role[i][s] {
+                Role::Train => sums[i].0.add(&one),
+                _ => sums[i].1.add(&one),
+            }
+            if keep {
+                after[i][s] = res;
+            }
+        }
+    }
+    (sums, after)
+}
+
 /// `tr` with channel j's delay or lag set to v (v = 0: none).
 fn with_channel(tr: &InputTransform, kind: EffectKind, j: usize, v: f64) -> InputTransform {
     let mut t = *tr;
@@ -366,33 +398,10 @@ fn input(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Ru
             EffectKind::ThrustGain | EffectKind::ThrustDecay | EffectKind::GroundEffect
         )
     });
-    let mut dts: Vec<f64> = segs.iter().map(|s| s.dt).collect();
-    dts.sort_by(f64::total_cmp);
-    let dt = dts[dts.len() / 2];
+    let dt = p.dt();
     let o = &p.options;
     // Evaluate one transform: per fit, training and test sums.
-    let eval = |tr: &InputTransform| -> Vec<(Sums, Sums)> {
-        let mut out = vec![(Sums::default(), Sums::default()); p.fits.len()];
-        for (s, seg) in segs.iter().enumerate() {
-            if role.iter().all(|r| r[s] == Role::None) {
-                continue;
-            }
-            let fs = seen_f(seg, p.base, tr);
-            let d = design_from(seg, &fs, &p.ctx, &state.linear);
-            for (i, th) in state.theta.iter().enumerate() {
-                if role[i][s] == Role::None {
-                    continue;
-                }
-                let res = d.residual(&state.linear, th);
-                let one = sums_masked(std::slice::from_ref(&res), &[0], std::slice::from_ref(&p.mask[s]));
-                match role[i][s] {
-                    Role::Train => out[i].0.add(&one),
-                    _ => out[i].1.add(&one),
-                }
-            }
-        }
-        out
-    };
+    let eval = |tr: &InputTransform| -> Vec<(Sums, Sums)> { under(p, state, tr, false).0 };
     // Per channel: the scan.
     struct ChannelScan {
         param: InputParam,

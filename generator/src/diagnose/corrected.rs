@@ -84,9 +84,7 @@ pub(crate) fn corrections(
         }
     }
     for j in 0..4 {
-        let delays_named =
-            state.named.contains(&EffectKind::Latency) || state.named.contains(&EffectKind::ChannelResponse);
-        if delays_named && state.transform.delay[j] > 0.0 {
+        if state.delays_named() && state.transform.delay[j] > 0.0 {
             c.latency.insert(inputs[j].clone(), state.transform.delay[j]);
         }
         if let Some(tau) = state.transform.lag[j] {

@@ -17,10 +17,9 @@
 //! costs it two parameters more per channel (ΔBIC), so the simpler effect wins where it explains
 //! as much.
 
-use super::candidate::{finish, After, Candidate, Install, Params, Scored};
+use super::candidate::{finish, under, Candidate, Install, Params, Scored};
 use super::catalogue::inputs::InputTransform;
 use super::catalogue::EffectKind;
-use super::design::{design_from, seen_f};
 use super::fit::{profile_sigma, MAX_LAG};
 use super::horizon_rule::horizon_errors;
 use super::residuals::filter;
@@ -63,34 +62,6 @@ fn with(tr: &InputTransform, j: usize, d: f64, tau: f64, gain: Option<f64>) -> I
     t.lag[j] = (tau > 0.0).then_some(tau);
     t.gain[j] = gain;
     t
-}
-
-/// Per fit: (training sums, held-out sums) and the residuals, of the model under `tr`.
-fn residuals(p: &Problem, state: &State, tr: &InputTransform, keep: bool) -> (Vec<(Sums, Sums)>, After) {
-    let segs = p.data.variant(state.destale);
-    let mut sums = vec![(Sums::default(), Sums::default()); p.fits.len()];
-    let mut after: After = vec![vec![Vec::new(); segs.len()]; p.fits.len()];
-    for (s, seg) in segs.iter().enumerate() {
-        let fs = seen_f(seg, p.base, tr);
-        let d = design_from(seg, &fs, &p.ctx, &state.linear);
-        for (i, fold) in p.fits.iter().enumerate() {
-            let (train, test) = (fold.train.contains(&s), fold.test.contains(&s));
-            if !train && !test {
-                continue;
-            }
-            let res = d.residual(&state.linear, &state.theta[i]);
-            let one = sums_masked(std::slice::from_ref(&res), &[0], std::slice::from_ref(&p.mask[s]));
-            if train {
-                sums[i].0.add(&one);
-            } else {
-                sums[i].1.add(&one);
-            }
-            if keep {
-                after[i][s] = res;
-            }
-        }
-    }
-    (sums, after)
 }
 
 /// The filtered gain regressor of input j under `tr` at every segment's interior samples.
@@ -168,7 +139,7 @@ fn scan(p: &Problem, state: &State, j: usize, aff: &[usize], tau_c: &[f64; 6], s
         {
             return;
         }
-        let (sums, _) = residuals(p, state, &with(&state.transform, j, d, tau, None), false);
+        let (sums, _) = under(p, state, &with(&state.transform, j, d, tau, None), false);
         points.push((d, tau, sums[fin].0));
     };
     let best_of = |points: &[(f64, f64, Sums)]| -> usize {
@@ -254,7 +225,7 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
         let seed = p.seeds[j];
         let sc = scan(p, state, j, &aff, &tau_c, seed);
         let tr = with(&state.transform, j, sc.delay, sc.lag, None);
-        let (_, res) = residuals(p, state, &tr, true);
+        let (_, res) = under(p, state, &tr, true);
         let cols = gain_columns(p, state, &tr, j);
         let (a, var) = gain_fit(p, &res[fin], &cols, train, &aff);
         let z = lr_z(&before, &sc.train_after, &tau_c, &aff);
@@ -329,7 +300,7 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
         }
     }
     let transform = accepted.0;
-    let (_, after) = residuals(p, state, &transform, true);
+    let (_, after) = under(p, state, &transform, true);
     let mut channels: Vec<usize> = used.iter().flat_map(|&q| affs[q].clone()).collect();
     channels.sort_unstable();
     channels.dedup();

@@ -134,6 +134,12 @@ pub(crate) struct State {
 }
 
 impl State {
+    /// Whether the transform's delays are named effects (`latency` or `channel_response`), to be
+    /// written and backfitted.
+    pub fn delays_named(&self) -> bool {
+        self.named.contains(&EffectKind::Latency) || self.named.contains(&EffectKind::ChannelResponse)
+    }
+
     pub fn empty(fits: usize) -> Self {
         Self {
             destale: false,
@@ -245,9 +251,8 @@ fn refit(p: &Problem, state: &mut State) {
 /// The named input channels: (effect, input index).
 fn named_inputs(state: &State) -> Vec<(EffectKind, usize)> {
     let mut out = Vec::new();
-    let delays_named = state.named.contains(&EffectKind::Latency) || state.named.contains(&EffectKind::ChannelResponse);
     for j in 0..4 {
-        if delays_named && state.transform.delay[j] > 0.0 {
+        if state.delays_named() && state.transform.delay[j] > 0.0 {
             out.push((EffectKind::Latency, j));
         }
     }
@@ -277,9 +282,7 @@ fn backfit(p: &Problem, state: &mut State) {
     let fin = p.final_fit();
     let train = p.fits[fin].train.clone();
     let segs = p.data.variant(state.destale);
-    let mut dts: Vec<f64> = segs.iter().map(|s| s.dt).collect();
-    dts.sort_by(f64::total_cmp);
-    let dt = dts[dts.len() / 2];
+    let dt = p.dt();
     for _ in 0..2 {
         for &(kind, j) in &inputs {
             let current = match kind {
