@@ -173,18 +173,15 @@ fn delay_compensation_improves_tracking_with_a_delayed_plant() {
     );
 }
 
-/// The shipped crates have no latency: their `INPUT_DELAY_SAMPLES` are zeros and the compensator
-/// is the identity.
+/// A crate whose model has no latency (pd_paper): its `INPUT_DELAY_SAMPLES` are zeros and the
+/// compensator is the identity. sindy_m100 carries its identified u_vz delay (4 samples).
 #[test]
 fn no_delay_compensation_is_the_identity_with_a_generated_crate() {
     use uavgen_runtime::{DelayCompensator, StatePredictor};
-    assert_eq!(sindy_m100::INPUT_DELAY, [0.0; 4]);
-    let mut c = DelayCompensator::<f64, _, 12, 4, 4>::new(
-        sindy_m100::discrete_dynamics,
-        sindy_m100::INPUT_DELAY_SAMPLES,
-        [0.0; 4],
-    )
-    .unwrap();
+    assert_eq!(pd_paper::INPUT_DELAY, [0.0; 4]);
+    let mut c =
+        DelayCompensator::<f64, _, 12, 4, 4>::new(pd_paper::discrete_dynamics, pd_paper::INPUT_DELAY_SAMPLES, [0.0; 4])
+            .unwrap();
     c.record(&[1.0, 0.2, -0.1, 0.3]);
     let x = [0.5, -1.0, 3.0, 0.1, -0.05, 0.7, 1.0, 0.5, -0.2, 0.1, 0.2, -0.3];
     assert_eq!(c.predict(&x), x);

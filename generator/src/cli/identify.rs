@@ -86,6 +86,12 @@ pub struct IdentifyArgs {
     /// √2; SR3 λ = --threshold (0.05) × 0.1, 0.2, 0.5, 1, 2, 4, 8, 16.
     #[arg(long, value_delimiter = ',')]
     sweep_values: Option<Vec<f64>>,
+    /// SINDy, STLSQ: the ridge weight α of each least-squares pass (on normalised columns). Default:
+    /// the ridge ladder 0.001, 0.01, 0.1 — the first α whose selection passes the horizon check. A
+    /// larger α shrinks nearly collinear term pairs (large coefficients of opposite sign that cancel
+    /// on the logs and explode off them) so the threshold can drop them (docs/sindy.md).
+    #[arg(long)]
+    alpha: Option<f64>,
     /// Write the model even if it fails the horizon check (one MPC horizon of free run from random
     /// envelope states under constant, often saturated, inputs must stay bounded).
     #[arg(long)]
@@ -241,6 +247,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             return Err(format!("--threshold: must be a finite number >= 0, got {t}"));
         }
     }
+    if let Some(a) = args.alpha.filter(|a| !(a.is_finite() && (0.0..=1e6).contains(a))) {
+        return Err(format!("--alpha: must be a number in 0 … 1e6, got {a}"));
+    }
     if args.sweep_values.is_some() && !args.sweep && args.threshold.is_some() {
         return Err("--sweep-values: not with --threshold (a single sparsity value) unless --sweep is given".into());
     }
@@ -338,72 +347,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         });
     }
     let json = match args.method {
-        Method::Sindy => {
-            let threshold = args.threshold.unwrap_or(0.05);
-            let optimizer = match args.optimizer {
-                OptimizerArg::Stlsq => Optimizer::Stlsq {
-                    threshold,
-                    alpha: 1e-3,
-                    max_iter: 20,
-                    unbias: true,
-                },
-                OptimizerArg::Sr3L0 => Optimizer::sr3(Regularizer::L0, threshold),
-                OptimizerArg::Sr3L1 => Optimizer::sr3(Regularizer::L1, threshold),
-            };
-            let sweeping = args.sweep || args.threshold.is_none();
-            let sweep = sweeping.then(|| match (&args.sweep_values, args.optimizer) {
-                (Some(v), _) => v.clone(),
-                (None, OptimizerArg::Stlsq) => stlsq_sweep(),
-                (None, _) => SR3_SWEEP.iter().map(|f| threshold.max(1e-3) * f).collect(),
-            });
-            let options = SindyOptions {
-                library: match args.library {
-                    LibraryArg::Paper => LibraryKind::Paper,
-                    LibraryArg::Physics => LibraryKind::Physics,
-                },
-                optimizer,
-                sweep,
-                selection: AicSelection::PerRow,
-                criterion: match args.criterion {
-                    CriterionArg::Aic => Criterion::Aic,
-                    CriterionArg::Bic => Criterion::Bic,
-                },
-                rows: if args.all_rows {
-                    FittedRows::All
-                } else {
-                    FittedRows::Dynamic
-                },
-                ..SindyOptions::default()
-            };
-            eprintln!(
-                "fitting SINDy on {} samples from {} log(s) ...",
-                dataset.len(),
-                logs.len()
-            );
-            let bar = progress_bar(options.sweep.as_ref().map_or(1, Vec::len), "sparsity values");
-            let fit = sindy::fit_with_progress(&dataset, &options, &name, provenance, &mut |done, _| {
-                bar.set_position(done as u64)
-            })
-            .map_err(|e| e.to_string())?;
-            bar.finish_and_clear();
-            let mut fit = fit;
-            if options.sweep.is_some() && !args.no_horizon_check {
-                let check = HorizonCheck::default();
-                let with = |fit: &sindy::SindyFit| attach(&fit.to_json(), &args, response);
-                if let Some(sel) = select_bounded_corrected(&mut fit, &check, &with) {
-                    for (row, from, to) in &sel.moves {
-                        eprintln!("  horizon check: {row} moved from sparsity {from} to {to}");
-                    }
-                }
-            }
-            for row in &fit.rows {
-                eprintln!(
-                    "  {:<10} {:>3} terms, training RMSE {:.4}, R² {:.3}",
-                    row.state, row.terms, row.rmse, row.r2
-                );
-            }
-            serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())?
-        }
+        Method::Sindy => fit_sindy(&args, &dataset, logs.len(), &name, provenance, response)?,
         Method::Pd => {
             check_positive("mass", args.mass)?;
             let mut options = PdFitOptions {
@@ -448,6 +392,107 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     super::write_atomically(&args.out, &json)?;
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// The ridge weights `identify` tries in turn without --alpha (docs/sindy.md, "Ridge ladder").
+const RIDGE_LADDER: [f64; 3] = [1e-3, 1e-2, 1e-1];
+
+/// The SINDy fit of `identify`: the sweep, selection by the criterion, then rows moved to sparser
+/// values until one MPC horizon stays bounded; without --alpha the ridge ladder is climbed until
+/// that succeeds (the last rung's fit is kept if none does, for the caller's check to report).
+fn fit_sindy(
+    args: &IdentifyArgs,
+    dataset: &uavgen::identify::dataset::Dataset,
+    logs: usize,
+    name: &str,
+    provenance: serde_json::Value,
+    response: Option<InputResponse>,
+) -> Result<String, String> {
+    let threshold = args.threshold.unwrap_or(0.05);
+    let sweeping = args.sweep || args.threshold.is_none();
+    let sweep = sweeping.then(|| match (&args.sweep_values, args.optimizer) {
+        (Some(v), _) => v.clone(),
+        (None, OptimizerArg::Stlsq) => stlsq_sweep(),
+        (None, _) => SR3_SWEEP.iter().map(|f| threshold.max(1e-3) * f).collect(),
+    });
+    let ladder: Vec<f64> = match (args.alpha, args.optimizer) {
+        (Some(a), _) => vec![a],
+        (None, OptimizerArg::Stlsq) if sweep.is_some() && !args.no_horizon_check => RIDGE_LADDER.to_vec(),
+        (None, _) => vec![RIDGE_LADDER[0]],
+    };
+    eprintln!("fitting SINDy on {} samples from {logs} log(s) ...", dataset.len());
+    let mut fit = None;
+    for (rung, &alpha) in ladder.iter().enumerate() {
+        let optimizer = match args.optimizer {
+            OptimizerArg::Stlsq => Optimizer::Stlsq {
+                threshold,
+                alpha,
+                max_iter: 20,
+                unbias: true,
+            },
+            OptimizerArg::Sr3L0 => Optimizer::sr3(Regularizer::L0, threshold),
+            OptimizerArg::Sr3L1 => Optimizer::sr3(Regularizer::L1, threshold),
+        };
+        let options = SindyOptions {
+            library: match args.library {
+                LibraryArg::Paper => LibraryKind::Paper,
+                LibraryArg::Physics => LibraryKind::Physics,
+            },
+            optimizer,
+            sweep: sweep.clone(),
+            selection: AicSelection::PerRow,
+            criterion: match args.criterion {
+                CriterionArg::Aic => Criterion::Aic,
+                CriterionArg::Bic => Criterion::Bic,
+            },
+            rows: if args.all_rows {
+                FittedRows::All
+            } else {
+                FittedRows::Dynamic
+            },
+            ..SindyOptions::default()
+        };
+        let bar = progress_bar(options.sweep.as_ref().map_or(1, Vec::len), "sparsity values");
+        let mut f = sindy::fit_with_progress(dataset, &options, name, provenance.clone(), &mut |done, _| {
+            bar.set_position(done as u64)
+        })
+        .map_err(|e| e.to_string())?;
+        bar.finish_and_clear();
+        let mut passed = true;
+        if options.sweep.is_some() && !args.no_horizon_check {
+            let check = HorizonCheck::default();
+            let with = |fit: &sindy::SindyFit| attach(&fit.to_json(), args, response);
+            if let Some(sel) = select_bounded_corrected(&mut f, &check, &with) {
+                for (row, from, to) in &sel.moves {
+                    eprintln!("  horizon check: {row} moved from sparsity {from} to {to}");
+                }
+                passed = sel.report.passed();
+                if !passed && rung + 1 < ladder.len() {
+                    eprintln!(
+                        "  ridge α = {alpha}: {} of {} horizon-check trials still unbounded; refitting with α = {}",
+                        sel.report.unbounded,
+                        sel.report.trials,
+                        ladder[rung + 1]
+                    );
+                }
+            }
+        }
+        fit = Some(f);
+        if passed {
+            if ladder.len() > 1 {
+                eprintln!("  ridge α = {alpha} (the first of {ladder:?} whose selection passes the horizon check)");
+            }
+            break;
+        }
+    }
+    let fit = fit.ok_or("no SINDy fit")?;
+    for row in &fit.rows {
+        eprintln!(
+            "  {:<10} {:>3} terms, training RMSE {:.4}, R² {:.3}",
+            row.state, row.terms, row.rmse, row.r2
+        );
+    }
+    serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())
 }
 
 /// The model text with the input response as `corrections` (latency, actuator_lag).

@@ -63,7 +63,7 @@ impl Augmented<'_> {
             base,
             ctx,
             linear: Vec::new(),
-            transform: InputTransform::default(),
+            transform: base.inherited,
         }
     }
 
@@ -135,7 +135,7 @@ impl Augmented<'_> {
         let mut s = vec![[0.0; 10]; n];
         for j in 0..4 {
             let col: Vec<f64> = seg.u.iter().map(|r| r[j]).collect();
-            let d = delayed(&col, seg.dt, self.transform.delay[j]);
+            let d = delayed(&col, seg.dt, self.transform.total_delay(j));
             let st = match self.transform.lag[j] {
                 Some(tau) => lag_states(&d, seg.dt, tau),
                 None => d.clone(),

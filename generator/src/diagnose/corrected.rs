@@ -84,8 +84,15 @@ pub(crate) fn corrections(
         }
     }
     for j in 0..4 {
-        if state.delays_named() && state.transform.delay[j] > 0.0 {
-            c.latency.insert(inputs[j].clone(), state.transform.delay[j]);
+        // The base model's own delay plus the fitted one, when named.
+        let fitted = if state.delays_named() {
+            state.transform.delay[j]
+        } else {
+            0.0
+        };
+        let total = state.transform.base_delay[j] + fitted;
+        if total > 0.0 {
+            c.latency.insert(inputs[j].clone(), total);
         }
         if let Some(tau) = state.transform.lag[j] {
             c.actuator_lag.insert(inputs[j].clone(), tau);

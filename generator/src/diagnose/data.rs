@@ -152,13 +152,15 @@ fn build(
         .map(|d| std::array::from_fn(|c| d[6 + c]))
         .collect();
     let m = base.substeps(dt, rows.source)?;
-    let f: Vec<[f64; 12]> = x.iter().zip(rows.u).map(|(x, u)| base.f(x, u)).collect();
+    // The inputs the base model sees (its own delays and lags, if it has them).
+    let seen = base.inherited.apply(rows.u, dt);
+    let f: Vec<[f64; 12]> = x.iter().zip(&seen).map(|(x, u)| base.f(x, u)).collect();
     let (w, r) = match residual {
         ResidualKind::Matched => {
             // One-step errors (x_{m+1} − F(x_m, u_m))/Δt of vx..yaw_rate, m = 0..n−2.
             let mut e = vec![[0.0; 6]; n];
             for k in 0..n - 1 {
-                let next = base.step(&x[k], &rows.u[k], dt, m);
+                let next = base.step(&x[k], &seen[k], dt, m);
                 e[k] = std::array::from_fn(|c| (x[k + 1][6 + c] - next[6 + c]) / dt);
             }
             let w = kernel(savgol, dt);

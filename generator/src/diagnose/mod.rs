@@ -31,6 +31,7 @@ mod design;
 mod envelope;
 pub mod fit;
 mod horizon_rule;
+mod inherited;
 mod loop_fit;
 mod plots;
 mod report_json;
@@ -128,7 +129,7 @@ impl Default for DiagnoseOptions {
 pub enum DiagnoseError {
     #[error("model `{model}` has {nx} states and {nu} inputs, but flight logs have 12 states and 4 inputs")]
     Dimensions { model: String, nx: usize, nu: usize },
-    #[error("model `{model}` already has a `corrections` block; diagnose its base model (the file without the block)")]
+    #[error("model `{model}` has a `corrections` block with more than an input response (latency, actuator_lag); diagnose its base model (the file without those corrections)")]
     HasCorrections { model: String },
     #[error("no training logs")]
     NoLogs,
@@ -269,12 +270,18 @@ fn summaries(logs: &[FlightLog], data: &[data::SegData], holdout: bool) -> Vec<L
         .collect()
 }
 
+/// The base of the diagnosis: the model lowered without its `corrections` block, with the input
+/// response the block gives ([`inherited`]).
+fn base_of(model: &Model, options: &DiagnoseOptions) -> Result<residuals::Base, DiagnoseError> {
+    let (stripped, transform) = inherited::split(model)?;
+    let mut base = residuals::Base::new(&stripped, options.substeps, options.gravity);
+    base.inherited = transform;
+    Ok(base)
+}
+
 fn check(model: &Model, train: &[FlightLog], options: &DiagnoseOptions) -> Result<(), DiagnoseError> {
-    if model.corrections.is_some() {
-        return Err(DiagnoseError::HasCorrections {
-            model: model.name.clone(),
-        });
-    }
+    let (model, _) = inherited::split(model)?;
+    let model = &model;
     if model.nx() != 12 || model.nu() != 4 {
         return Err(DiagnoseError::Dimensions {
             model: model.name.clone(),
@@ -371,7 +378,7 @@ pub fn diagnose_with_reference(
 /// correction cannot be expected to remove.
 pub fn base_side(model: &Model, logs: &[FlightLog], options: &DiagnoseOptions) -> Result<Side, DiagnoseError> {
     check(model, logs, options)?;
-    let base = residuals::Base::new(model, options.substeps, options.gravity);
+    let base = base_of(model, options)?;
     let ctx = Context {
         gravity: base.gravity,
         rotor_radius: options.rotor_radius,
@@ -434,7 +441,7 @@ fn run(
     progress: &mut dyn FnMut(Progress),
 ) -> Result<Diagnosis, DiagnoseError> {
     check(model, train, options)?;
-    let base = residuals::Base::new(model, options.substeps, options.gravity);
+    let base = base_of(model, options)?;
     let ctx = Context {
         gravity: base.gravity,
         rotor_radius: options.rotor_radius,
@@ -576,6 +583,7 @@ fn run(
 
     let effects = assemble::effects(&rounds, &state, &linear, options.rotor_radius);
     let rounds_report = assemble::rounds(&rounds);
+    notes.extend(inherited::note(&base.inherited, &model.inputs));
     notes.extend(assemble::notes(&data, &state, options));
     let response_named = [
         EffectKind::Latency,

@@ -51,6 +51,9 @@ pub(crate) fn impulse(h: usize) -> Vec<f64> {
 /// The base model, lowered once, with its RK4 step and the substep rule.
 pub(crate) struct Base {
     pub ir: ModelIr,
+    /// The model's own input response (its `latency` / `actuator_lag`; [`super::inherited`]): the
+    /// inputs the base model sees. The identity for a model without a `corrections` block.
+    pub inherited: super::catalogue::inputs::InputTransform,
     pub gravity: f64,
     fixed_substeps: Option<usize>,
     cache: RefCell<Vec<(f64, usize)>>,
@@ -64,6 +67,7 @@ impl Base {
         });
         Self {
             ir: ModelIr::new(model),
+            inherited: Default::default(),
             gravity: g,
             fixed_substeps: substeps,
             cache: RefCell::new(Vec::new()),

@@ -68,11 +68,11 @@ impl ChannelTime {
 fn respond(aug: &Augmented, j: usize, dt: f64, substeps: usize) -> Response {
     // The step comes after `pre` samples at rest, so that a delay delays it (the delayed input
     // holds its first value before the log starts).
-    let pre = 1 + (aug.transform.delay[j] / dt).ceil() as usize;
+    let pre = 1 + (aug.transform.total_delay(j) / dt).ceil() as usize;
     let n = pre + (SETTLE / dt).ceil() as usize + 1;
     let run = |delta: f64| -> Vec<f64> {
         let col: Vec<f64> = (0..n).map(|m| if m >= pre { delta } else { 0.0 }).collect();
-        let v = delayed(&col, dt, aug.transform.delay[j]);
+        let v = delayed(&col, dt, aug.transform.total_delay(j));
         let mut x = [0.0; 12];
         x[2] = 5.0;
         let u0 = [0.0; 4];

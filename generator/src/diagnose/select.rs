@@ -140,10 +140,11 @@ impl State {
         self.named.contains(&EffectKind::Latency) || self.named.contains(&EffectKind::ChannelResponse)
     }
 
-    pub fn empty(fits: usize) -> Self {
+    /// No effect named yet; the base model's own input response ([`super::inherited`]) in place.
+    pub fn empty(fits: usize, base: &Base) -> Self {
         Self {
             destale: false,
-            transform: InputTransform::default(),
+            transform: base.inherited,
             linear: Vec::new(),
             theta: vec![Vec::new(); fits],
             named: Vec::new(),
@@ -417,7 +418,7 @@ pub(crate) fn select(
     rules: &Rules,
     progress: &mut dyn FnMut(usize, usize, &str),
 ) -> (State, Vec<Round>) {
-    let mut state = State::empty(p.fits.len());
+    let mut state = State::empty(p.fits.len(), p.base);
     let mut rounds = Vec::new();
     let mut done = 0;
     let mut base_test: Option<Sums> = None;

@@ -163,6 +163,12 @@ impl Drop for HarnessBackend {
 }
 
 /// The generic reference solver (interpreted model, clarabel), one RTI step per sample.
+///
+/// A model with `corrections.latency` is compensated as the generated crate's harness does it
+/// (uavgen-runtime's `DelayCompensator`, runtime/src/delay.rs): delays in whole samples
+/// round(d/Δt), the MPC solves from the state predicted over the largest delay D with the inputs
+/// already sent (a channel whose input is not sent yet holds the latest), and its reference
+/// window starts D samples ahead.
 pub struct GenericBackend {
     mpc: GenericMpc,
     options: MpcOptions,
@@ -170,6 +176,12 @@ pub struct GenericBackend {
     t: f64,
     dt: f64,
     nx: usize,
+    /// The model lowered once more, for the delay prediction, and its RK4 substeps.
+    ir: ModelIr,
+    substeps: usize,
+    /// Input delay per channel in samples, and the inputs sent, the latest first (D of them).
+    delays: Vec<usize>,
+    history: Vec<Vec<f64>>,
 }
 
 impl GenericBackend {
@@ -180,6 +192,7 @@ impl GenericBackend {
             substeps,
             options: options.clone(),
         };
+        let delays: Vec<usize> = model.input_delays().iter().map(|d| (d / dt).round() as usize).collect();
         Self {
             mpc: GenericMpc::new(ModelIr::new(model), problem),
             options,
@@ -187,14 +200,43 @@ impl GenericBackend {
             t: 0.0,
             dt,
             nx: model.nx(),
+            ir: ModelIr::new(model),
+            substeps,
+            delays,
+            history: Vec::new(),
         }
+    }
+
+    /// D: the largest input delay in samples.
+    fn lookahead(&self) -> usize {
+        self.delays.iter().copied().max().unwrap_or(0)
+    }
+
+    /// x̂_D: the state when the input computed now takes effect on the slowest channel,
+    /// x̂ₘ₊₁ = F(x̂ₘ, ûₘ), ûₘ,ᵢ = u_{k+m−dᵢ, i} (the latest sent once m ≥ dᵢ).
+    fn predict(&self, x: &[f64]) -> Vec<f64> {
+        let mut xm = x.to_vec();
+        for m in 0..self.lookahead() {
+            let u: Vec<f64> = self
+                .delays
+                .iter()
+                .enumerate()
+                .map(|(i, &d)| {
+                    let age = if m < d { d - m } else { 1 };
+                    self.history.get(age - 1).map_or(0.0, |h| h[i])
+                })
+                .collect();
+            xm = crate::discretize::discrete_step(&self.ir, &xm, &u, self.dt, self.substeps);
+        }
+        xm
     }
 
     fn window(&self) -> Vec<Vec<f64>> {
         let n = self.mpc.problem().horizon;
+        let lead = self.lookahead() as f64 * self.dt;
         (0..=n)
             .map(|k| {
-                let t = self.t + k as f64 * self.dt;
+                let t = self.t + lead + k as f64 * self.dt;
                 let mut r = vec![0.0; self.nx];
                 for (i, p) in self.trajectory.position(t).into_iter().enumerate() {
                     r[i] = p;
@@ -219,13 +261,15 @@ impl Backend for GenericBackend {
         self.trajectory = trajectory;
         self.t = t0;
         self.mpc.initialize(x0, u);
+        self.history = vec![u.to_vec(); self.lookahead()];
         Ok(())
     }
 
     fn step(&mut self, x: &[f64]) -> Result<StepAnswer, String> {
         let reference = self.window();
         let start = Instant::now();
-        let result = self.mpc.rti_step(x, &reference);
+        let x = self.predict(x);
+        let result = self.mpc.rti_step(&x, &reference);
         let elapsed = start.elapsed().as_nanos() as f64;
         let (u, status, qp_iterations) = match result {
             Ok(s) => (s.u0, "Solved".to_string(), s.qp_iterations),
@@ -250,6 +294,10 @@ impl Backend for GenericBackend {
                 v.clamp(lo, hi)
             })
             .collect();
+        if !self.history.is_empty() {
+            self.history.rotate_right(1);
+            self.history[0] = u.clone();
+        }
         Ok(StepAnswer {
             u,
             status,

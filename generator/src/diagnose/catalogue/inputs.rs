@@ -29,8 +29,10 @@ pub fn lag_channel_name(j: usize) -> String {
 /// model's acceleration rows (motor lag: ℓ̇ = (b − ℓ)/τ replaces the row b).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct InputTransform {
-    /// Pure delay per channel, s (0: none).
+    /// Pure delay per channel, s (0: none): the fitted part, on top of `base_delay`.
     pub delay: [f64; 4],
+    /// The base model's own delay per channel (its `corrections.latency`; [`super::super::inherited`]).
+    pub base_delay: [f64; 4],
     /// First-order lag time constant per channel, s.
     pub lag: [Option<f64>; 4],
     /// First-order lag time constant per acceleration row (vx … yaw_rate), s.
@@ -43,11 +45,16 @@ pub struct InputTransform {
 
 impl InputTransform {
     pub fn is_identity(&self) -> bool {
-        self.delay.iter().all(|d| *d == 0.0)
+        self.delay.iter().chain(&self.base_delay).all(|d| *d == 0.0)
             && self.lag.iter().all(Option::is_none)
             && self.accel_lag.iter().all(Option::is_none)
             && self.loops.iter().all(Option::is_none)
             && self.gain.iter().all(Option::is_none)
+    }
+
+    /// The delay channel j sees: the base model's own plus the fitted one.
+    pub fn total_delay(&self, j: usize) -> f64 {
+        self.base_delay[j] + self.delay[j]
     }
 
     /// The gain of input channel j (1 without one).
@@ -109,11 +116,11 @@ impl InputTransform {
     pub fn apply(&self, u: &[[f64; 4]], dt: f64) -> Vec<[f64; 4]> {
         let mut out = u.to_vec();
         for j in 0..4 {
-            if self.delay[j] == 0.0 && self.lag[j].is_none() && self.gain[j].is_none() {
+            if self.total_delay(j) == 0.0 && self.lag[j].is_none() && self.gain[j].is_none() {
                 continue;
             }
             let col: Vec<f64> = u.iter().map(|r| r[j]).collect();
-            let seen = channel_average(&col, dt, self.delay[j], self.lag[j]);
+            let seen = channel_average(&col, dt, self.total_delay(j), self.lag[j]);
             let k = self.gain_of(j);
             for (o, v) in out.iter_mut().zip(seen) {
                 o[j] = k * v;
