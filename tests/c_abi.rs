@@ -3,7 +3,9 @@
 //! - examples/c is built with gcc against `include/sindy_m100.h` and `libsindy_m100_capi.a`, runs
 //!   its 900-sample closed loop, and every input it prints must equal the Rust solver's on the same
 //!   loop to 1e-12 (statuses and QP iterations exactly);
-//! - the ABI refuses bad pointers with its status codes, called from Rust through the capi rlib.
+//! - the ABI refuses bad pointers with its status codes, called from Rust through the capi rlib;
+//! - examples/cpp builds with g++: the flight-stack-agnostic wrapper runs its host check, the PX4
+//!   module skeleton compiles against its stubs.
 
 use std::path::Path;
 use std::process::Command;
@@ -97,31 +99,40 @@ fn tool_missing(tool: &str) -> bool {
     Command::new(tool).arg("--version").output().is_err()
 }
 
-#[test]
-fn c_example_matches_the_rust_solver_over_900_steps() {
-    for tool in ["gcc", "make"] {
-        if tool_missing(tool) {
-            println!("SKIPPED c_example_matches_the_rust_solver_over_900_steps: `{tool}` is not installed");
-            return;
-        }
-    }
+/// `make -C examples/<dir>` with the test's own target directory (the workspace's is locked by the
+/// `cargo test` running this); the output directory.
+fn make_example(dir: &str) -> std::path::PathBuf {
     let root = uavgen_tests::repo_root();
-    // Its own target directory: the workspace's is locked by the `cargo test` running this.
     let target = root.join("target").join("c-abi-test");
-    let out = target.join("example");
+    let out = target.join(dir);
     let make = Command::new("make")
         .arg("-C")
-        .arg(root.join("examples/c"))
+        .arg(root.join("examples").join(dir))
         .arg(format!("CARGO_TARGET_DIR={}", target.display()))
         .arg(format!("OUT={}", out.display()))
         .output()
         .expect("run make");
     assert!(
         make.status.success(),
-        "make -C examples/c failed:\n{}\n{}",
+        "make -C examples/{dir} failed:\n{}\n{}",
         String::from_utf8_lossy(&make.stdout),
         String::from_utf8_lossy(&make.stderr)
     );
+    out
+}
+
+/// Name the first of `tools` that is not installed.
+fn missing(tools: &[&str]) -> Option<String> {
+    tools.iter().find(|t| tool_missing(t)).map(|t| t.to_string())
+}
+
+#[test]
+fn c_example_matches_the_rust_solver_over_900_steps() {
+    if let Some(tool) = missing(&["gcc", "make"]) {
+        println!("SKIPPED c_example_matches_the_rust_solver_over_900_steps: `{tool}` is not installed");
+        return;
+    }
+    let out = make_example("c");
     let binary = out.join("closed_loop");
     let run = Command::new(&binary).output().expect("run the C example");
     let stdout = String::from_utf8_lossy(&run.stdout);
@@ -263,4 +274,27 @@ fn the_abi_refuses_bad_pointers_and_changes_nothing() {
     assert!(Path::new(&uavgen_tests::repo_root())
         .join("examples/c/closed_loop.c")
         .exists());
+}
+
+#[test]
+fn cpp_examples_build_and_the_wrapper_flies() {
+    if let Some(tool) = missing(&["g++", "make"]) {
+        println!("SKIPPED cpp_examples_build_and_the_wrapper_flies: `{tool}` is not installed");
+        return;
+    }
+    let out = make_example("cpp");
+    assert!(
+        out.join("uavgen_mpc_module.o").exists(),
+        "the PX4 module skeleton did not compile"
+    );
+    let run = Command::new(out.join("wrapper_check"))
+        .output()
+        .expect("run wrapper_check");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success() && stdout.starts_with("wrapper-check ok"),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    println!("{}", stdout.trim());
 }
