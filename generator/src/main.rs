@@ -222,6 +222,14 @@ fn generate(args: GenerateArgs) -> Result<(), String> {
         options.horizon,
         generated.substeps
     );
+    if options.c_api {
+        let p = uavgen::codegen::c_api::prefix(&generated.crate_name);
+        println!(
+            "C ABI: {}/include/{p}.h; build lib{p}_capi.a with `cargo build --release --manifest-path {}/capi/Cargo.toml` (docs/c-api.md)",
+            out.display(),
+            out.display()
+        );
+    }
     Ok(())
 }
 

@@ -186,3 +186,51 @@ int main(void) {
     let z: f64 = String::from_utf8_lossy(&run.stdout).trim().parse().unwrap();
     assert!((z - 1.0).abs() < 0.1, "climbed to z = {z}, not to the 1 m setpoint");
 }
+
+#[test]
+fn the_cli_flag_writes_the_header_and_the_package() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("m");
+    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/pd_hover.json");
+    let run = Command::new(env!("CARGO_BIN_EXE_uavgen"))
+        .arg("--model")
+        .arg(&model)
+        .args([
+            "--horizon",
+            "5",
+            "--substeps",
+            "1",
+            "--crate-name",
+            "my-hover",
+            "--c-api",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{stdout}{}", String::from_utf8_lossy(&run.stderr));
+    // `-` in the crate name becomes `_` in C identifiers and in the library's name.
+    assert!(
+        stdout.contains("include/my_hover.h") && stdout.contains("libmy_hover_capi.a"),
+        "{stdout}"
+    );
+    let header = fs::read_to_string(out.join("include/my_hover.h")).unwrap();
+    assert!(header.contains("#define MY_HOVER_N 5") && header.contains("my_hover_status my_hover_solve("));
+    let manifest = fs::read_to_string(out.join("capi/Cargo.toml")).unwrap();
+    assert!(manifest.contains("name = \"my-hover_capi\"") && manifest.contains("my-hover = { path = \"..\" }"));
+    assert!(fs::read_to_string(out.join("capi/src/ffi.rs"))
+        .unwrap()
+        .contains("use my_hover::{"));
+    // Without the flag: no header, no package.
+    let plain = dir.path().join("plain");
+    let run = Command::new(env!("CARGO_BIN_EXE_uavgen"))
+        .arg("--model")
+        .arg(&model)
+        .args(["--horizon", "5", "--substeps", "1", "--out"])
+        .arg(&plain)
+        .output()
+        .unwrap();
+    assert!(run.status.success());
+    assert!(!plain.join("include").exists() && !plain.join("capi").exists());
+}
