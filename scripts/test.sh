@@ -39,7 +39,7 @@ if command -v llvm-nm >/dev/null; then
     done
     echo "$capi defines the ABI's functions"
 fi
-if command -v arm-none-eabi-gcc >/dev/null; then
+if command -v arm-none-eabi-gcc >/dev/null && command -v make >/dev/null; then
     # A freestanding C program for Cortex-M7 (hard-float EABI) links against it, with no panic path.
     make -s -C examples/c cortex-m
     if arm-none-eabi-nm target/c-example/cortex_m.elf | grep -qi panic; then
@@ -47,7 +47,7 @@ if command -v arm-none-eabi-gcc >/dev/null; then
         exit 1
     fi
 else
-    echo "arm-none-eabi-gcc not found: skipping the Cortex-M link of examples/c/cortex_m.c (Debian: gcc-arm-none-eabi)"
+    echo "arm-none-eabi-gcc or make not found: skipping the Cortex-M link of examples/c/cortex_m.c (Debian: gcc-arm-none-eabi)"
 fi
 
 echo "== firmware example links a generated solver (thumbv7em-none-eabihf, panic = abort)"
