@@ -8,5 +8,5 @@ uavgen=${CARGO_TARGET_DIR:-target}/release/uavgen
 $uavgen --model models/pd_paper.json --horizon 30 --out generated/pd_paper
 $uavgen --model models/pd_hover.json --horizon 30 --out generated/pd_hover
 $uavgen --model models/pd_hover.json --horizon 30 --float f32 --crate-name pd_hover_f32 --out generated/pd_hover_f32
-$uavgen --model models/sindy_m100.json --horizon 30 --out generated/sindy_m100
+$uavgen --model models/sindy_m100.json --horizon 30 --c-api --out generated/sindy_m100
 $uavgen --model models/pd_m100.json --horizon 30 --out generated/pd_m100

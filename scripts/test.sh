@@ -3,7 +3,7 @@
 #  1. installs what the tests need (the thumbv7em target, clippy, rustfmt);
 #  2. checks formatting and clippy;
 #  3. regenerates generated/ and fails if the checked-in crates differ;
-#  4. builds the no_std crates and the firmware example for thumbv7em-none-eabihf;
+#  4. builds the no_std crates, the C ABI staticlib and the firmware example for thumbv7em-none-eabihf;
 #  5. runs all unit, property, reference and CLI tests (release build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,6 +27,28 @@ fi
 echo "== no_std crates build for thumbv7em-none-eabihf"
 cargo build --release -q --target thumbv7em-none-eabihf \
     -p uavgen-templates -p uavgen-runtime -p pd_paper -p pd_hover -p pd_hover_f32 -p sindy_m100 -p pd_m100
+
+echo "== the C ABI staticlib builds for thumbv7em-none-eabihf (docs/c-api.md)"
+cargo build --release -q --target thumbv7em-none-eabihf -p sindy_m100_capi
+capi=target/thumbv7em-none-eabihf/release/libsindy_m100_capi.a
+test -s "$capi" || { echo "$capi was not built" >&2; exit 1; }
+if command -v llvm-nm >/dev/null; then
+    for symbol in sindy_m100_init sindy_m100_prepare sindy_m100_feedback sindy_m100_shift sindy_m100_solve; do
+        llvm-nm --defined-only "$capi" 2>/dev/null | grep -q " T $symbol\$" ||
+            { echo "$capi does not define $symbol" >&2; exit 1; }
+    done
+    echo "$capi defines the ABI's functions"
+fi
+if command -v arm-none-eabi-gcc >/dev/null && command -v make >/dev/null; then
+    # A freestanding C program for Cortex-M7 (hard-float EABI) links against it, with no panic path.
+    make -s -C examples/c cortex-m
+    if arm-none-eabi-nm target/c-example/cortex_m.elf | grep -qi panic; then
+        echo "examples/c/cortex_m.c: a panic path is linked in" >&2
+        exit 1
+    fi
+else
+    echo "arm-none-eabi-gcc or make not found: skipping the Cortex-M link of examples/c/cortex_m.c (Debian: gcc-arm-none-eabi)"
+fi
 
 echo "== firmware example links a generated solver (thumbv7em-none-eabihf, panic = abort)"
 (cd runtime/firmware-example && cargo build --release -q)

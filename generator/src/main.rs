@@ -102,6 +102,9 @@ struct GenerateArgs {
     /// MPC options file: weights, input bounds, QP limits (default: the paper's but q yaw 1, r u_yaw_rate 10; examples/mpc_paper.json has the paper's; see docs/mpc.md).
     #[arg(long)]
     mpc: Option<PathBuf>,
+    /// Also emit a C ABI: include/<name>.h and the capi/ package (staticlib lib<name>_capi.a) for C/C++ flight stacks (docs/c-api.md).
+    #[arg(long)]
+    c_api: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -190,6 +193,7 @@ fn generate(args: GenerateArgs) -> Result<(), String> {
             FloatArg::F32 => Float::F32,
         },
         crate_name: args.crate_name,
+        c_api: args.c_api,
         ..GenerateOptions::default()
     };
     options.validate().map_err(|e| e.to_string())?;
@@ -218,6 +222,14 @@ fn generate(args: GenerateArgs) -> Result<(), String> {
         options.horizon,
         generated.substeps
     );
+    if options.c_api {
+        let p = uavgen::codegen::c_api::prefix(&generated.crate_name);
+        println!(
+            "C ABI: {}/include/{p}.h; build lib{p}_capi.a with `cargo build --release --manifest-path {}/capi/Cargo.toml` (docs/c-api.md)",
+            out.display(),
+            out.display()
+        );
+    }
     Ok(())
 }
 

@@ -13,12 +13,13 @@ pub fn lines(model: &Model, options: &GenerateOptions, substeps: usize, mpc: &Mp
         ),
         format!("model: {} (sha256 {})", model.source.file, model.source.sha256),
         format!(
-            "options: horizon={} rate={} Hz substeps={}{} float={}",
+            "options: horizon={} rate={} Hz substeps={}{} float={}{}",
             options.horizon,
             options.rate_hz,
             substeps,
             if options.substeps.is_none() { " (auto)" } else { "" },
-            options.float.name()
+            options.float.name(),
+            if options.c_api { " c-api" } else { "" }
         ),
         format!(
             "mpc: q={:?} q_terminal={:?} r={:?} u_min={:?} u_max={:?} max_qp_iterations={} regularisation={:e}",

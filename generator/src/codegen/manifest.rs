@@ -29,7 +29,7 @@ pub fn readme(
          let x_next = {crate_name}::discrete_dynamics(&x, &u);      // x⁺ = F(x, u)\n\
          let (a, b) = {crate_name}::discrete_jacobians(&x, &u);     // A = ∂F/∂x, B = ∂F/∂u\n\
          ```\n\n\
-         See uavgen's docs/generated-api.md for the full API.\n",
+         See uavgen's docs/generated-api.md for the full API.\n{c_api}",
         model.name,
         model.kind_name(),
         options.float.name(),
@@ -40,5 +40,22 @@ pub fn readme(
         options.horizon,
         options.rate_hz,
         substeps,
+        c_api = if options.c_api {
+            let p = super::c_api::prefix(crate_name);
+            format!(
+                "\n## C ABI\n\n\
+                 Generated with `--c-api`: `include/{p}.h` declares the C functions of the `capi/` package, a\n\
+                 `staticlib` (`lib{p}_capi.a`) whose only `unsafe` code is `capi/src/ffi.rs`. The caller owns the\n\
+                 solver's storage (`{p}_storage`, {up}_STORAGE_SIZE bytes).\n\n\
+                 ```sh\n\
+                 cargo build --release --manifest-path capi/Cargo.toml                                # host\n\
+                 cargo build --release --manifest-path capi/Cargo.toml --target thumbv7em-none-eabihf # Cortex-M4F/M7\n\
+                 ```\n\n\
+                 See uavgen's docs/c-api.md for the functions, the statuses and PX4, ArduPilot and ROS 2.\n",
+                up = p.to_ascii_uppercase()
+            )
+        } else {
+            String::new()
+        },
     )
 }

@@ -1,6 +1,7 @@
 //! Code generation: model → one `TokenStream` per module → prettyplease →
 //! files of a `no_std` crate.
 
+pub mod c_api;
 pub mod header;
 mod lib_rs;
 mod manifest;
@@ -33,6 +34,8 @@ pub struct GenerateOptions {
     pub envelope: Envelope,
     /// MPC weights, bounds and limits; `None`: `MpcOptions::defaults` for the model.
     pub mpc: Option<MpcOptions>,
+    /// Also emit the C ABI: `include/<name>.h` and the `capi/` staticlib package (docs/c-api.md).
+    pub c_api: bool,
 }
 
 impl Default for GenerateOptions {
@@ -45,6 +48,7 @@ impl Default for GenerateOptions {
             crate_name: None,
             envelope: Envelope::default(),
             mpc: None,
+            c_api: false,
         }
     }
 }
@@ -200,6 +204,17 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
             PathBuf::from(name),
             rs_header.clone() + &prettyplease::unparse(&splice::template(source)),
         ));
+    }
+    if options.c_api {
+        let api = c_api::CApi {
+            crate_name: &crate_name,
+            model,
+            options,
+            mpc: &mpc,
+            substeps,
+            header: &head,
+        };
+        files.extend(api.files().map_err(GenerateError::Template)?);
     }
     Ok(GeneratedCrate {
         crate_name,

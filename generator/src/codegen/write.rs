@@ -98,9 +98,9 @@ fn stage_and_swap(dir: &Path, staging: &Path, old: &Path, files: &[(PathBuf, Str
         });
     }
     // Build products survive regeneration.
-    for keep in ["target", "Cargo.lock"] {
+    for keep in ["target", "Cargo.lock", "capi/target", "capi/Cargo.lock"] {
         let from = old.join(keep);
-        if from.exists() {
+        if from.exists() && dir.join(keep).parent().is_some_and(Path::is_dir) {
             fs::rename(&from, dir.join(keep)).map_err(io_err(&from))?;
         }
     }
