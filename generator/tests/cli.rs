@@ -787,3 +787,68 @@ fn identify_sindy_defaults_on_the_m100_logs() {
     assert!(stderr(&o).contains("stayed bounded"), "{}", stderr(&o));
     assert!(stderr(&o).contains("ridge α"), "{}", stderr(&o));
 }
+
+/// `--alpha`: the ridge ladder by default (its first rung on clean simulated data, printed and
+/// recorded), a fixed α when given, refused where it means nothing or is not a number.
+#[test]
+fn identify_alpha_is_the_ridge_ladder_unless_given() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = tmp.path().join("flight.csv");
+    let o = uavgen(&[
+        "simulate",
+        "--plant",
+        repo().join("plants/nominal.json").to_str().unwrap(),
+        "--profile",
+        "excite",
+        "--duration",
+        "60",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let run = |extra: &[&str], out: &Path| {
+        let mut args = vec![
+            "identify",
+            "--log",
+            log.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        uavgen(&args)
+    };
+    let ladder = tmp.path().join("ladder.json");
+    let o = run(&["--method", "sindy"], &ladder);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("ridge α = 0.001 (the first of"), "{err}");
+    let alpha = |p: &Path| -> f64 {
+        let v: serde_json::Value = serde_json::from_str(&fs::read_to_string(p).unwrap()).unwrap();
+        v["provenance"]["optimizer"]["alpha"].as_f64().unwrap()
+    };
+    assert_eq!(alpha(&ladder), 0.001);
+    let fixed = tmp.path().join("fixed.json");
+    let o = run(&["--method", "sindy", "--alpha", "0.02"], &fixed);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("ridge α"), "{}", stderr(&o));
+    assert_eq!(alpha(&fixed), 0.02);
+    for (extra, what) in [
+        (vec!["--method", "sindy", "--alpha", "nan"], "must be a number"),
+        (vec!["--method", "sindy", "--alpha=-1"], "must be a number"),
+        (vec!["--method", "pd", "--alpha", "0.1"], "not with --method pd"),
+        (
+            vec!["--method", "sindy", "--optimizer", "sr3-l0", "--alpha", "0.1"],
+            "SR3",
+        ),
+    ] {
+        let bad = tmp.path().join("bad.json");
+        let o = run(&extra, &bad);
+        assert!(!o.status.success(), "{extra:?}");
+        assert!(
+            stderr(&o).contains("--alpha") && stderr(&o).contains(what),
+            "{extra:?}: {}",
+            stderr(&o)
+        );
+        assert!(!bad.exists());
+    }
+}

@@ -250,6 +250,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     if let Some(a) = args.alpha.filter(|a| !(a.is_finite() && (0.0..=1e6).contains(a))) {
         return Err(format!("--alpha: must be a number in 0 … 1e6, got {a}"));
     }
+    if args.alpha.is_some() && !matches!((&args.method, &args.optimizer), (Method::Sindy, OptimizerArg::Stlsq)) {
+        return Err("--alpha: the ridge weight of SINDy's STLSQ; not with --method pd or an SR3 optimiser".into());
+    }
     if args.sweep_values.is_some() && !args.sweep && args.threshold.is_some() {
         return Err("--sweep-values: not with --threshold (a single sparsity value) unless --sweep is given".into());
     }
@@ -399,7 +402,8 @@ const RIDGE_LADDER: [f64; 3] = [1e-3, 1e-2, 1e-1];
 
 /// The SINDy fit of `identify`: the sweep, selection by the criterion, then rows moved to sparser
 /// values until one MPC horizon stays bounded; without --alpha the ridge ladder is climbed until
-/// that succeeds (the last rung's fit is kept if none does, for the caller's check to report).
+/// that succeeds (if no rung does, the one with the fewest unbounded trials is kept, for the
+/// caller's check to report).
 fn fit_sindy(
     args: &IdentifyArgs,
     dataset: &uavgen::identify::dataset::Dataset,
@@ -421,7 +425,8 @@ fn fit_sindy(
         (None, _) => vec![RIDGE_LADDER[0]],
     };
     eprintln!("fitting SINDy on {} samples from {logs} log(s) ...", dataset.len());
-    let mut fit = None;
+    // The fit kept: the first rung that passes, else the one with the fewest unbounded trials.
+    let mut fit: Option<(usize, f64, sindy::SindyFit)> = None;
     for (rung, &alpha) in ladder.iter().enumerate() {
         let optimizer = match args.optimizer {
             OptimizerArg::Stlsq => Optimizer::Stlsq {
@@ -458,7 +463,7 @@ fn fit_sindy(
         })
         .map_err(|e| e.to_string())?;
         bar.finish_and_clear();
-        let mut passed = true;
+        let mut unbounded = 0;
         if options.sweep.is_some() && !args.no_horizon_check {
             let check = HorizonCheck::default();
             let with = |fit: &sindy::SindyFit| attach(&fit.to_json(), args, response);
@@ -466,8 +471,8 @@ fn fit_sindy(
                 for (row, from, to) in &sel.moves {
                     eprintln!("  horizon check: {row} moved from sparsity {from} to {to}");
                 }
-                passed = sel.report.passed();
-                if !passed && rung + 1 < ladder.len() {
+                unbounded = sel.report.unbounded;
+                if unbounded > 0 && rung + 1 < ladder.len() {
                     eprintln!(
                         "  ridge α = {alpha}: {} of {} horizon-check trials still unbounded; refitting with α = {}",
                         sel.report.unbounded,
@@ -477,15 +482,26 @@ fn fit_sindy(
                 }
             }
         }
-        fit = Some(f);
-        if passed {
+        let better = match &fit {
+            None => true,
+            Some((u, _, _)) => unbounded < *u,
+        };
+        if better {
+            fit = Some((unbounded, alpha, f));
+        }
+        if unbounded == 0 {
             if ladder.len() > 1 {
                 eprintln!("  ridge α = {alpha} (the first of {ladder:?} whose selection passes the horizon check)");
             }
             break;
         }
     }
-    let fit = fit.ok_or("no SINDy fit")?;
+    let (unbounded, alpha, fit) = fit.ok_or("no SINDy fit")?;
+    if unbounded > 0 && ladder.len() > 1 {
+        eprintln!(
+            "  ridge α: no rung of {ladder:?} passes the horizon check; keeping α = {alpha} (the fewest unbounded trials, {unbounded})"
+        );
+    }
     for row in &fit.rows {
         eprintln!(
             "  {:<10} {:>3} terms, training RMSE {:.4}, R² {:.3}",
