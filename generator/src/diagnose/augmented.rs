@@ -63,7 +63,7 @@ impl Augmented<'_> {
             base,
             ctx,
             linear: Vec::new(),
-            transform: base.inherited,
+            transform: InputTransform::of_base(base),
         }
     }
 

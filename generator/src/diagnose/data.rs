@@ -2,6 +2,7 @@
 //! targets, the base model's filtered one-step residuals ([`super::residuals`]), the stale rows and
 //! the flight time; and the same with stale rows interpolated (the `stale_samples` augmentation).
 
+use super::catalogue::inputs::InputTransform;
 use super::residuals::{filter, impulse, kernel, Base, ResidualKind};
 use super::DiagnoseError;
 use crate::identify::preprocess::{try_columnwise, SavGol};
@@ -153,7 +154,7 @@ fn build(
         .collect();
     let m = base.substeps(dt, rows.source)?;
     // The inputs the base model sees (its own delays and lags, if it has them).
-    let seen = base.inherited.apply(rows.u, dt);
+    let seen = InputTransform::of_base(base).apply(rows.u, dt);
     let f: Vec<[f64; 12]> = x.iter().zip(&seen).map(|(x, u)| base.f(x, u)).collect();
     let (w, r) = match residual {
         ResidualKind::Matched => {

@@ -8,15 +8,15 @@
 //! corrected.json carries the totals. Any other correction in the block (drag, biases, …) is
 //! refused: diagnose the model without it.
 
-use super::catalogue::inputs::InputTransform;
+use super::residuals::OwnResponse;
 use super::DiagnoseError;
 use crate::model::{Corrections, Model};
 
 /// The model without its `corrections` block (and without the extra states the block adds), and
 /// the input response the block gives (the identity without a block).
-pub(crate) fn split(model: &Model) -> Result<(Model, InputTransform), DiagnoseError> {
+pub(crate) fn split(model: &Model) -> Result<(Model, OwnResponse), DiagnoseError> {
     let Some(c) = &model.corrections else {
-        return Ok((model.clone(), InputTransform::default()));
+        return Ok((model.clone(), OwnResponse::default()));
     };
     let response_only = Corrections {
         source: None,
@@ -29,24 +29,24 @@ pub(crate) fn split(model: &Model) -> Result<(Model, InputTransform), DiagnoseEr
             model: model.name.clone(),
         });
     }
-    let mut transform = InputTransform::default();
+    let mut own = OwnResponse::default();
     for (j, input) in model.inputs.iter().enumerate().take(4) {
-        transform.base_delay[j] = c.latency.get(input).copied().unwrap_or(0.0);
-        transform.lag[j] = c.actuator_lag.get(input).copied();
+        own.delay[j] = c.latency.get(input).copied().unwrap_or(0.0);
+        own.lag[j] = c.actuator_lag.get(input).copied();
     }
     let extra = c.extra_states(&model.inputs).len();
     let mut stripped = model.clone();
     stripped.states.truncate(stripped.states.len() - extra);
     stripped.corrections = None;
-    Ok((stripped, transform))
+    Ok((stripped, own))
 }
 
 /// What the report says about the model's own input response (None without one).
-pub(crate) fn note(transform: &InputTransform, inputs: &[String]) -> Option<String> {
+pub(crate) fn note(own: &OwnResponse, inputs: &[String]) -> Option<String> {
     let parts: Vec<String> = (0..4)
         .filter_map(|j| {
-            let d = transform.base_delay[j];
-            let lag = transform.lag[j];
+            let d = own.delay[j];
+            let lag = own.lag[j];
             if d == 0.0 && lag.is_none() {
                 return None;
             }

@@ -273,9 +273,9 @@ fn summaries(logs: &[FlightLog], data: &[data::SegData], holdout: bool) -> Vec<L
 /// The base of the diagnosis: the model lowered without its `corrections` block, with the input
 /// response the block gives ([`inherited`]).
 fn base_of(model: &Model, options: &DiagnoseOptions) -> Result<residuals::Base, DiagnoseError> {
-    let (stripped, transform) = inherited::split(model)?;
+    let (stripped, own) = inherited::split(model)?;
     let mut base = residuals::Base::new(&stripped, options.substeps, options.gravity);
-    base.inherited = transform;
+    base.own = own;
     Ok(base)
 }
 
@@ -583,7 +583,7 @@ fn run(
 
     let effects = assemble::effects(&rounds, &state, &linear, options.rotor_radius);
     let rounds_report = assemble::rounds(&rounds);
-    notes.extend(inherited::note(&base.inherited, &model.inputs));
+    notes.extend(inherited::note(&base.own, &model.inputs));
     notes.extend(assemble::notes(&data, &state, options));
     let response_named = [
         EffectKind::Latency,

@@ -48,12 +48,20 @@ pub(crate) fn impulse(h: usize) -> Vec<f64> {
     w
 }
 
+/// The input response a model file carries (`corrections.latency`, `corrections.actuator_lag`), per
+/// input channel: part of the base model in a diagnosis (docs/diagnose.md, "The corrected model").
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct OwnResponse {
+    pub delay: [f64; 4],
+    pub lag: [Option<f64>; 4],
+}
+
 /// The base model, lowered once, with its RK4 step and the substep rule.
 pub(crate) struct Base {
     pub ir: ModelIr,
-    /// The model's own input response (its `latency` / `actuator_lag`; [`super::inherited`]): the
-    /// inputs the base model sees. The identity for a model without a `corrections` block.
-    pub inherited: super::catalogue::inputs::InputTransform,
+    /// The model's own input response (its `latency` / `actuator_lag`): the inputs the base model
+    /// sees. None for a model without a `corrections` block.
+    pub own: OwnResponse,
     pub gravity: f64,
     fixed_substeps: Option<usize>,
     cache: RefCell<Vec<(f64, usize)>>,
@@ -67,7 +75,7 @@ impl Base {
         });
         Self {
             ir: ModelIr::new(model),
-            inherited: Default::default(),
+            own: OwnResponse::default(),
             gravity: g,
             fixed_substeps: substeps,
             cache: RefCell::new(Vec::new()),

@@ -140,11 +140,11 @@ impl State {
         self.named.contains(&EffectKind::Latency) || self.named.contains(&EffectKind::ChannelResponse)
     }
 
-    /// No effect named yet; the base model's own input response ([`super::inherited`]) in place.
+    /// No effect named yet; the base model's own input response in place.
     pub fn empty(fits: usize, base: &Base) -> Self {
         Self {
             destale: false,
-            transform: base.inherited,
+            transform: InputTransform::of_base(base),
             linear: Vec::new(),
             theta: vec![Vec::new(); fits],
             named: Vec::new(),

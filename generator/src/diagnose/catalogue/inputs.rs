@@ -31,7 +31,7 @@ pub fn lag_channel_name(j: usize) -> String {
 pub struct InputTransform {
     /// Pure delay per channel, s (0: none): the fitted part, on top of `base_delay`.
     pub delay: [f64; 4],
-    /// The base model's own delay per channel (its `corrections.latency`; [`super::super::inherited`]).
+    /// The base model's own delay per channel (its `corrections.latency`).
     pub base_delay: [f64; 4],
     /// First-order lag time constant per channel, s.
     pub lag: [Option<f64>; 4],
@@ -44,6 +44,15 @@ pub struct InputTransform {
 }
 
 impl InputTransform {
+    /// No fitted effect: the base model with its own input response ([`Base::own`]).
+    pub(crate) fn of_base(base: &Base) -> Self {
+        Self {
+            base_delay: base.own.delay,
+            lag: base.own.lag,
+            ..Self::default()
+        }
+    }
+
     pub fn is_identity(&self) -> bool {
         self.delay.iter().chain(&self.base_delay).all(|d| *d == 0.0)
             && self.lag.iter().all(Option::is_none)
