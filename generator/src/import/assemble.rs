@@ -61,6 +61,8 @@ pub struct Summary {
     pub dropped_segments: usize,
     /// Samples per second of each state topic (median).
     pub topic_rates: Vec<(String, f64)>,
+    /// Other remarks (an optional channel left out, …).
+    pub notes: Vec<String>,
 }
 
 pub const GROUPS: [&str; 4] = ["position", "velocity", "attitude", "rates"];
@@ -269,15 +271,20 @@ pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result
         }
         inputs.push(c);
     }
+    // The battery voltage is optional in the log contract: a profile's battery topic that the
+    // file does not have is noted, not an error.
     let battery = match &profile.battery_voltage {
-        Some(b) => {
-            let (t, cols) = rec.series(&b.topic, &[b.field.as_str()])?;
-            Some(Channel {
+        Some(b) => match rec.series(&b.topic, &[b.field.as_str()]) {
+            Ok((t, cols)) => Some(Channel {
                 what: format!("battery_voltage (`{}` `{}`)", b.topic, b.field),
                 t: t.to_vec(),
                 v: cols[0].iter().map(|x| [b.scale * x + b.offset]).collect(),
-            })
-        }
+            }),
+            Err(e) => {
+                summary.notes.push(format!("no battery_voltage column: {}", e.message));
+                None
+            }
+        },
         None => None,
     };
 

@@ -1,6 +1,6 @@
 //! Import flight logs of other flight stacks into the log contract (docs/import.md).
 //!
-//! A format reader ([`ulog`], [`mcap`]) turns a file into a [`Recording`] (the profile's
+//! A format reader ([`ulog`], [`mcap`] with [`rosmsg`]) turns a file into a [`Recording`] (the profile's
 //! topics and fields as time series, the names of everything else in the file, and where the file
 //! broke if it did); [`assemble`] converts it with a [`Profile`] into rows of the log contract
 //! (frames, Euler angles and their rates, zero-order hold onto the row times, stale flags,
@@ -10,8 +10,10 @@
 pub mod assemble;
 pub mod error;
 pub mod frames;
+pub mod mcap;
 pub mod profile;
 pub mod recording;
+pub mod rosmsg;
 pub mod ulog;
 
 pub use assemble::{GridOptions, Row, Summary, GROUPS};
@@ -152,6 +154,7 @@ pub fn import_bytes(
     let needs = profile.needs();
     let rec = match format {
         Format::Ulog => ulog::read(label, bytes, &needs)?,
+        Format::Mcap => mcap::read(label, bytes, &needs, profile.clock)?,
         Format::Csv => {
             return Err(ImportError::new(
                 label,
@@ -159,7 +162,7 @@ pub fn import_bytes(
                 "this is a CSV flight log already (docs/log-format.md): use it directly",
             ))
         }
-        Format::Mcap | Format::Bag | Format::DataFlash => {
+        Format::Bag | Format::DataFlash => {
             return Err(ImportError::new(
                 label,
                 ImportErrorKind::WrongFormat,
@@ -320,7 +323,7 @@ impl Imported {
         if let Some(b) = &self.broken {
             let _ = write!(out, "\n  warning: {b}; the rows before it are kept");
         }
-        for n in &self.notes {
+        for n in self.summary.notes.iter().chain(&self.notes) {
             let _ = write!(out, "\n  note: {n}");
         }
         out

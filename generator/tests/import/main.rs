@@ -3,9 +3,11 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+mod mcap_writer;
 mod ulog_writer;
 
 use common::{repo, stderr, uavgen};
+use mcap_writer::{Cdr, McapFile};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 use uavgen::import::{import_bytes, Format, ImportErrorKind, ImportOptions, Profile};
@@ -431,6 +433,199 @@ fn cli_import_writes_atomically_and_fails_cleanly() {
     Profile::parse(&String::from_utf8_lossy(&r.stdout), "printed").unwrap();
 }
 
+/// Euler-angle rates at attitude `e` → FLU body rates (what a ROS IMU reports).
+fn flu_rates(d: [f64; 3], e: [f64; 3]) -> [f64; 3] {
+    let w = frd_rates(d, e);
+    [w[0], -w[1], -w[2]]
+}
+
+/// The flight as MAVROS on ROS 2 would record it (ENU/FLU, `ros2 bag record -s mcap`), header
+/// stamps at the sample times, log times 1 ms later.
+fn mavros_mcap(log: &FlightLog, compressed: bool, skip: Option<&str>) -> Vec<u8> {
+    let mut m = McapFile::new(compressed);
+    let topics = [
+        ("/mavros/local_position/pose", mcap_writer::pose_stamped()),
+        ("/mavros/local_position/velocity_local", mcap_writer::twist_stamped()),
+        ("/mavros/imu/data", mcap_writer::imu()),
+        ("/mavros/setpoint_velocity/cmd_vel", mcap_writer::twist_stamped()),
+        ("/mavros/setpoint_raw/target_attitude", mcap_writer::attitude_target()),
+    ];
+    for (topic, schema) in topics.iter().cloned() {
+        if Some(topic) != skip {
+            m.channel(topic, schema);
+        }
+    }
+    for s in &log.segments {
+        for k in 0..s.len() {
+            let ns = (s.t[k] * 1e9).round() as u64;
+            let (x, u) = (s.x[k], s.u[k]);
+            let e = [x[3], x[4], x[5]];
+            let q = quat(e);
+            let zeros = [0.0; 9];
+            let mut messages = vec![
+                (topics[0].0, {
+                    let mut c = Cdr::new();
+                    c.header(ns, "map").f64s(&[x[0], x[1], x[2], q[1], q[2], q[3], q[0]]);
+                    c.0
+                }),
+                (topics[1].0, {
+                    let mut c = Cdr::new();
+                    c.header(ns, "map").f64s(&[x[6], x[7], x[8], 0.0, 0.0, 0.0]);
+                    c.0
+                }),
+                (topics[2].0, {
+                    let mut c = Cdr::new();
+                    c.header(ns, "base_link")
+                        .f64s(&[q[1], q[2], q[3], q[0]])
+                        .f64s(&zeros)
+                        .f64s(&flu_rates([x[9], x[10], x[11]], e))
+                        .f64s(&zeros)
+                        .f64s(&[0.0, 0.0, 9.81])
+                        .f64s(&zeros);
+                    c.0
+                }),
+                (topics[3].0, {
+                    let mut c = Cdr::new();
+                    c.header(ns, "map").f64s(&[0.0, 0.0, u[0], 0.0, 0.0, 0.0]);
+                    c.0
+                }),
+            ];
+            let qs = quat([u[1], u[2], x[5]]);
+            let mut c = Cdr::new();
+            c.header(ns, "map")
+                .u8(7)
+                .f64s(&[qs[1], qs[2], qs[3], qs[0]])
+                .f64s(&[0.0, 0.0, u[3]])
+                .f32(0.5);
+            messages.push((topics[4].0, c.0));
+            for (topic, data) in messages {
+                if Some(topic) != skip {
+                    m.message(topic, ns + 1_000_000, &data);
+                }
+            }
+        }
+    }
+    m.finish()
+}
+
+fn import_with(
+    profile: &str,
+    bytes: &[u8],
+    name: &str,
+    options: &ImportOptions,
+) -> Result<FlightLog, uavgen::import::ImportError> {
+    let profile = Profile::resolve(profile).unwrap();
+    let imported = import_bytes(name, Format::from_extension(Path::new(name)), bytes, &profile, options)?;
+    Ok(parse_log(&imported.to_csv(), name).unwrap())
+}
+
+#[test]
+fn mcap_ros2_round_trips_the_simulated_flight() {
+    let (_, sim) = simulated();
+    for compressed in [false, true] {
+        let bytes = mavros_mcap(&sim, compressed, None);
+        let log = import_with("mavros", &bytes, "flight.mcap", &ImportOptions::default()).unwrap();
+        let (dt, dx, du) = max_diff(&sim, &log);
+        eprintln!("MCAP (zstd {compressed}) round trip: max |Δt| {dt:e} s, max |Δx| {dx:e}, max |Δu| {du:e}");
+        assert!(dt <= 1e-9 && dx <= 1e-9 && du <= 1e-9, "{dt:e} {dx:e} {du:e}");
+    }
+    // With the receive clock the rows are at the log times, 1 ms later.
+    let bytes = mavros_mcap(&sim, false, None);
+    let mut profile = Profile::resolve("mavros").unwrap();
+    profile.clock = uavgen::import::profile::Clock::Receive;
+    let imported = import_bytes(
+        "f.mcap",
+        Some(Format::Mcap),
+        &bytes,
+        &profile,
+        &ImportOptions::default(),
+    )
+    .unwrap();
+    assert!((imported.rows[0].t - sim.segments[0].t[0] - 1e-3).abs() < 1e-12);
+    // No /mavros/battery in this file: noted, not an error.
+    assert!(
+        imported
+            .report()
+            .contains("no battery_voltage column: f.mcap: topic `/mavros/battery`")
+            || imported.report().contains("no battery_voltage column"),
+        "{}",
+        imported.report()
+    );
+}
+
+#[test]
+fn mcap_errors_name_topics_and_where_the_file_broke() {
+    let (_, sim) = simulated();
+    let bytes = mavros_mcap(&sim, true, Some("/mavros/imu/data"));
+    let e = import_with("mavros", &bytes, "a.mcap", &ImportOptions::default()).unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::MissingTopic);
+    assert!(
+        e.message.contains("topic `/mavros/imu/data` is not in this MCAP file"),
+        "{e}"
+    );
+    assert!(e.message.contains("`/mavros/local_position/pose`"), "{e}");
+    // A field the message type does not have.
+    let mut profile = Profile::resolve("mavros").unwrap();
+    profile.velocity.fields[2] = "twist.linear.w".into();
+    let bytes = mavros_mcap(&sim, false, None);
+    let e = import_bytes(
+        "b.mcap",
+        Some(Format::Mcap),
+        &bytes,
+        &profile,
+        &ImportOptions::default(),
+    )
+    .unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::MissingField);
+    assert!(
+        e.message
+            .contains("has no numeric field `twist.linear.w`; its fields are `header.stamp.sec`"),
+        "{e}"
+    );
+    // Truncated in the middle: an error that says after which message, or the prefix with --partial.
+    let cut = &bytes[..bytes.len() * 3 / 5];
+    let e = import_with("mavros", cut, "cut.mcap", &ImportOptions::default()).unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::Corrupt);
+    assert!(e.message.contains("the file is truncated after message"), "{e}");
+    assert!(e.message.contains("pass --partial"), "{e}");
+    let partial = ImportOptions {
+        partial: true,
+        ..ImportOptions::default()
+    };
+    let log = import_with("mavros", cut, "cut.mcap", &partial).unwrap();
+    let n = log.rows();
+    assert!(n > 100 && n < sim.rows(), "{n}");
+    let seg = &log.segments[0];
+    for k in 0..seg.len() {
+        for i in 0..12 {
+            assert!((seg.x[k][i] - sim.segments[0].x[k][i]).abs() < 1e-9);
+        }
+    }
+    // Time going backwards in a topic.
+    let mut m = McapFile::new(false);
+    m.channel("/p", mcap_writer::pose_stamped());
+    for (k, ns) in [0u64, 100_000_000, 50_000_000].iter().enumerate() {
+        let mut c = Cdr::new();
+        c.header(*ns, "map").f64s(&[k as f64, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+        m.message("/p", 1_000_000_000 + k as u64, &c.0);
+    }
+    let mut profile = Profile::resolve("mavros").unwrap();
+    profile.position.topic = "/p".into();
+    let e = import_bytes(
+        "back.mcap",
+        Some(Format::Mcap),
+        &m.finish(),
+        &profile,
+        &ImportOptions::default(),
+    )
+    .unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::TimeBackwards);
+    assert!(
+        e.message.contains("topic `/p`: time goes backwards at message 3"),
+        "{e}"
+    );
+}
+
 /// The numbers of a model file (coefficients, corrections), in file order.
 fn numbers(v: &serde_json::Value, out: &mut Vec<f64>) {
     match v {
@@ -442,15 +637,17 @@ fn numbers(v: &serde_json::Value, out: &mut Vec<f64>) {
 }
 
 #[test]
-fn identify_on_the_imported_ulog_gives_the_csv_model() {
+fn identify_on_the_imported_ulog_and_mcap_gives_the_csv_model() {
     let (csv, sim) = simulated();
     let tmp = tempfile::tempdir().unwrap();
     let csv_path = tmp.path().join("sim.csv");
     std::fs::write(&csv_path, &csv).unwrap();
     let ulg = tmp.path().join("px4.ulg");
     std::fs::write(&ulg, px4_ulog(&sim, &Px4Fixture::default()).bytes).unwrap();
+    let mcap = tmp.path().join("mavros.mcap");
+    std::fs::write(&mcap, mavros_mcap(&sim, true, None)).unwrap();
     let mut models = Vec::new();
-    for (log, profile) in [(&csv_path, None), (&ulg, Some("px4"))] {
+    for (log, profile) in [(&csv_path, None), (&ulg, Some("px4")), (&mcap, Some("mavros"))] {
         let out = tmp
             .path()
             .join(format!("{}.json", log.file_stem().unwrap().to_str().unwrap()));
@@ -467,9 +664,6 @@ fn identify_on_the_imported_ulog_gives_the_csv_model() {
             "--sweep",
             "--sweep-values",
             "5,20",
-            "--input-delay",
-            "none",
-            "--no-horizon-check",
         ];
         if let Some(p) = profile {
             args.extend(["--profile", p]);
@@ -481,18 +675,20 @@ fn identify_on_the_imported_ulog_gives_the_csv_model() {
         numbers(&json, &mut v);
         models.push(v);
     }
-    assert_eq!(models[0].len(), models[1].len());
     assert!(models[0].len() > 20);
-    let worst = models[0]
-        .iter()
-        .zip(&models[1])
-        .map(|(a, b)| (a - b).abs() / a.abs().max(1.0))
-        .fold(0.0, f64::max);
-    eprintln!(
-        "identify CSV vs imported ULog: {} numbers, worst difference {worst:e}",
-        models[0].len()
-    );
-    assert!(worst <= 1e-6, "{worst:e}");
+    for (other, what) in [(&models[1], "ULog"), (&models[2], "MCAP")] {
+        assert_eq!(models[0].len(), other.len());
+        let worst = models[0]
+            .iter()
+            .zip(other)
+            .map(|(a, b)| (a - b).abs() / a.abs().max(1.0))
+            .fold(0.0, f64::max);
+        eprintln!(
+            "identify CSV vs imported {what}: {} numbers, worst difference {worst:e}",
+            models[0].len()
+        );
+        assert!(worst <= 1e-6, "{what}: {worst:e}");
+    }
     // A non-CSV log without --profile is refused with a hint.
     let r = uavgen(&[
         "evaluate",
