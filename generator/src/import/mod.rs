@@ -1,6 +1,6 @@
 //! Import flight logs of other flight stacks into the log contract (docs/import.md).
 //!
-//! A format reader ([`ulog`], [`mcap`] with [`rosmsg`]) turns a file into a [`Recording`] (the profile's
+//! A format reader ([`ulog`]; [`mcap`] and [`bag`] with [`rosmsg`]) turns a file into a [`Recording`] (the profile's
 //! topics and fields as time series, the names of everything else in the file, and where the file
 //! broke if it did); [`assemble`] converts it with a [`Profile`] into rows of the log contract
 //! (frames, Euler angles and their rates, zero-order hold onto the row times, stale flags,
@@ -8,6 +8,7 @@
 //! [`crate::logs::load_any`] lets identify, evaluate and diagnose read such files directly.
 
 pub mod assemble;
+pub mod bag;
 pub mod error;
 pub mod frames;
 pub mod mcap;
@@ -155,6 +156,7 @@ pub fn import_bytes(
     let rec = match format {
         Format::Ulog => ulog::read(label, bytes, &needs)?,
         Format::Mcap => mcap::read(label, bytes, &needs, profile.clock)?,
+        Format::Bag => bag::read(label, bytes, &needs, profile.clock)?,
         Format::Csv => {
             return Err(ImportError::new(
                 label,
@@ -162,7 +164,7 @@ pub fn import_bytes(
                 "this is a CSV flight log already (docs/log-format.md): use it directly",
             ))
         }
-        Format::Bag | Format::DataFlash => {
+        Format::DataFlash => {
             return Err(ImportError::new(
                 label,
                 ImportErrorKind::WrongFormat,

@@ -1,11 +1,13 @@
 //! `uavgen import` and `--log FILE.ulg --profile px4`: fixtures written here from a simulated
 //! flight, imported back, compared with the simulator's CSV; every error case of docs/import.md.
 
+mod bag_writer;
 #[path = "../common/mod.rs"]
 mod common;
 mod mcap_writer;
 mod ulog_writer;
 
+use bag_writer::{BagWriter, Ros1};
 use common::{repo, stderr, uavgen};
 use mcap_writer::{Cdr, McapFile};
 use std::f64::consts::FRAC_PI_2;
@@ -622,6 +624,143 @@ fn mcap_errors_name_topics_and_where_the_file_broke() {
     assert_eq!(e.kind, ImportErrorKind::TimeBackwards);
     assert!(
         e.message.contains("topic `/p`: time goes backwards at message 3"),
+        "{e}"
+    );
+}
+
+/// The flight as the DJI Onboard SDK ROS node (ROS 1) would record it: ENU/FLU topics, the
+/// generic setpoint as sensor_msgs/Joy axes [roll, -pitch, vz, -yaw rate, flag] (float32).
+fn dji_bag(log: &FlightLog, rows_per_chunk: usize) -> BagWriter {
+    let sep = bag_writer::SEP;
+    let h = bag_writer::header_def();
+    let point = format!("{sep}MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n");
+    let vector = format!("{sep}MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n");
+    let quaternion = format!("{sep}MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n");
+    let mut b = BagWriter::new();
+    b.connection(
+        "/dji_sdk/local_position",
+        "geometry_msgs/PointStamped",
+        &format!("Header header\nPoint point\n{h}{point}"),
+    );
+    b.connection(
+        "/dji_sdk/velocity",
+        "geometry_msgs/Vector3Stamped",
+        &format!("Header header\nVector3 vector\n{h}{vector}"),
+    );
+    b.connection(
+        "/dji_sdk/attitude",
+        "geometry_msgs/QuaternionStamped",
+        &format!("Header header\nQuaternion quaternion\n{h}{quaternion}"),
+    );
+    b.connection(
+        "/dji_sdk/imu",
+        "sensor_msgs/Imu",
+        &format!(
+            "Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
+             geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n\
+             geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n{h}{quaternion}{vector}"
+        ),
+    );
+    b.connection(
+        "/dji_sdk/flight_control_setpoint_generic",
+        "sensor_msgs/Joy",
+        &format!("Header header\nfloat32[] axes\nint32[] buttons\n{h}"),
+    );
+    let mut row = 0u32;
+    for s in &log.segments {
+        for k in 0..s.len() {
+            let ns = (s.t[k] * 1e9).round() as u64;
+            let (x, u) = (s.x[k], s.u[k]);
+            let e = [x[3], x[4], x[5]];
+            let q = quat(e);
+            let zeros = [0.0; 9];
+            let recv = ns + 2_000_000;
+            let mut m = Ros1::default();
+            m.header(row, ns, "ground_ENU").f64s(&x[0..3]);
+            b.message("/dji_sdk/local_position", recv, &m.0);
+            let mut m = Ros1::default();
+            m.header(row, ns, "ground_ENU").f64s(&x[6..9]);
+            b.message("/dji_sdk/velocity", recv, &m.0);
+            let mut m = Ros1::default();
+            m.header(row, ns, "body_FLU").f64s(&[q[1], q[2], q[3], q[0]]);
+            b.message("/dji_sdk/attitude", recv, &m.0);
+            let mut m = Ros1::default();
+            m.header(row, ns, "body_FLU")
+                .f64s(&[q[1], q[2], q[3], q[0]])
+                .f64s(&zeros)
+                .f64s(&flu_rates([x[9], x[10], x[11]], e))
+                .f64s(&zeros)
+                .f64s(&[0.0, 0.0, 9.81])
+                .f64s(&zeros);
+            b.message("/dji_sdk/imu", recv, &m.0);
+            let mut m = Ros1::default();
+            m.header(row, ns, "")
+                .f32_seq(&[u[1] as f32, -u[2] as f32, u[0] as f32, -u[3] as f32, 0x4a as f32])
+                .i32_seq(&[]);
+            b.message("/dji_sdk/flight_control_setpoint_generic", recv, &m.0);
+            row += 1;
+            if row as usize % rows_per_chunk == 0 {
+                b.flush();
+            }
+        }
+    }
+    b
+}
+
+#[test]
+fn ros1_bag_round_trips_the_simulated_flight() {
+    let (_, sim) = simulated();
+    let bytes = dji_bag(&sim, 100).finish();
+    let log = import_with("dji-osdk-ros", &bytes, "flight.bag", &ImportOptions::default()).unwrap();
+    let (dt, dx, du) = max_diff(&sim, &log);
+    eprintln!("ROS 1 bag round trip: max |Δt| {dt:e} s, max |Δx| {dx:e}, max |Δu| {du:e} (Joy axes are float32)");
+    assert!(dt <= 1e-9 && dx <= 1e-9, "{dt:e} {dx:e}");
+    assert!(du <= 1e-6, "{du:e}");
+}
+
+#[test]
+fn ros1_bag_errors() {
+    let (_, sim) = simulated();
+    let w = dji_bag(&sim, 100);
+    let mut w2 = dji_bag(&sim, 100);
+    w2.flush();
+    let offsets = w2.chunk_offsets.clone();
+    let bytes = w.finish();
+    // Cut inside the fourth chunk: the three before it are kept with --partial.
+    let cut = &bytes[..offsets[3] + 500];
+    let e = import_with("dji-osdk-ros", cut, "cut.bag", &ImportOptions::default()).unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::Corrupt);
+    assert!(
+        e.message.contains(&format!(
+            "the file is truncated: the record at byte {} announces",
+            offsets[3]
+        )),
+        "{e}"
+    );
+    let partial = ImportOptions {
+        partial: true,
+        ..ImportOptions::default()
+    };
+    let log = import_with("dji-osdk-ros", cut, "cut.bag", &partial).unwrap();
+    assert_eq!(log.rows(), 300);
+    // A compressed chunk is named, with the way out.
+    let mut b = dji_bag(&sim, 100);
+    b.compression = "bz2";
+    let e = import_with("dji-osdk-ros", &b.finish(), "z.bag", &ImportOptions::default()).unwrap_err();
+    assert!(
+        e.message
+            .contains("is `bz2`-compressed: uavgen reads uncompressed bags (`rosbag decompress z.bag`"),
+        "{e}"
+    );
+    // A missing field of a ROS 1 message.
+    let mut profile = Profile::resolve("dji-osdk-ros").unwrap();
+    profile.inputs.u_vz.field = Some("axes_z".into());
+    let imported = import_bytes("f.bag", Some(Format::Bag), &bytes, &profile, &ImportOptions::default());
+    let e = imported.unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::MissingField);
+    assert!(
+        e.message
+            .contains("no numeric field `axes_z`; its fields are `header.seq`, `header.stamp.secs`"),
         "{e}"
     );
 }
