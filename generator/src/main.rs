@@ -39,7 +39,7 @@ enum Command {
     Simulate(cli::simulate::SimulateArgs),
     /// Closed-loop MPC on the plant simulator along one of the paper's trajectories (docs/track.md).
     Track(cli::track::TrackArgs),
-    /// Import a PX4 ULog, MCAP (ROS 2) or ROS 1 bag recording as a flight log CSV, mapped by a profile (docs/import.md).
+    /// Import a PX4 ULog, MCAP (ROS 2), ROS 1 bag or ArduPilot DataFlash recording as a flight log CSV, mapped by a profile (docs/import.md).
     Import(cli::import::ImportArgs),
     /// Diagnose a model on flight logs: where it parts from the data, which effect explains it, the corrected model (docs/diagnose.md).
     Diagnose(cli::diagnose::DiagnoseArgs),

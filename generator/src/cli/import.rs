@@ -7,8 +7,8 @@ use uavgen::import::{import_file, GridOptions, ImportOptions, Profile, PRESETS};
 
 #[derive(Args)]
 pub struct ImportArgs {
-    /// The recording: PX4 ULog (.ulg), MCAP (.mcap: ROS 2 bags, Foxglove) or ROS 1 bag (.bag);
-    /// ArduPilot DataFlash is not read yet (docs/import.md).
+    /// The recording: PX4 ULog (.ulg), MCAP (.mcap: ROS 2 bags, Foxglove), ROS 1 bag (.bag) or
+    /// ArduPilot DataFlash (.bin); the format is taken from the first bytes (docs/import.md).
     #[arg(required_unless_present = "print_profile")]
     file: Option<PathBuf>,
     /// Topic and field mapping: a preset (px4, mavros, dji-osdk-ros, ardupilot) or a profile file

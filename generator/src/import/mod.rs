@@ -1,6 +1,6 @@
 //! Import flight logs of other flight stacks into the log contract (docs/import.md).
 //!
-//! A format reader ([`ulog`]; [`mcap`] and [`bag`] with [`rosmsg`]) turns a file into a [`Recording`] (the profile's
+//! A format reader ([`ulog`], [`dataflash`]; [`mcap`] and [`bag`] with [`rosmsg`]) turns a file into a [`Recording`] (the profile's
 //! topics and fields as time series, the names of everything else in the file, and where the file
 //! broke if it did); [`assemble`] converts it with a [`Profile`] into rows of the log contract
 //! (frames, Euler angles and their rates, zero-order hold onto the row times, stale flags,
@@ -9,6 +9,7 @@
 
 pub mod assemble;
 pub mod bag;
+pub mod dataflash;
 pub mod error;
 pub mod frames;
 pub mod mcap;
@@ -157,18 +158,12 @@ pub fn import_bytes(
         Format::Ulog => ulog::read(label, bytes, &needs)?,
         Format::Mcap => mcap::read(label, bytes, &needs, profile.clock)?,
         Format::Bag => bag::read(label, bytes, &needs, profile.clock)?,
+        Format::DataFlash => dataflash::read(label, bytes, &needs)?,
         Format::Csv => {
             return Err(ImportError::new(
                 label,
                 ImportErrorKind::WrongFormat,
                 "this is a CSV flight log already (docs/log-format.md): use it directly",
-            ))
-        }
-        Format::DataFlash => {
-            return Err(ImportError::new(
-                label,
-                ImportErrorKind::WrongFormat,
-                format!("{} files are not supported yet (docs/import.md)", format.name()),
             ))
         }
     };

@@ -4,11 +4,13 @@
 mod bag_writer;
 #[path = "../common/mod.rs"]
 mod common;
+mod dataflash_writer;
 mod mcap_writer;
 mod ulog_writer;
 
 use bag_writer::{BagWriter, Ros1};
 use common::{repo, stderr, uavgen};
+use dataflash_writer::DataFlashWriter;
 use mcap_writer::{Cdr, McapFile};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
@@ -761,6 +763,116 @@ fn ros1_bag_errors() {
     assert!(
         e.message
             .contains("no numeric field `axes_z`; its fields are `header.seq`, `header.stamp.secs`"),
+        "{e}"
+    );
+}
+
+/// The flight as ArduCopter would log it (NED/FRD, degrees), plus a second EKF core and IMU
+/// that must be ignored.
+fn ardupilot_bin(log: &FlightLog) -> DataFlashWriter {
+    let deg = 180.0 / std::f64::consts::PI;
+    let mut w = DataFlashWriter::new();
+    w.message_type("XKF1", "QBdddddd", "TimeUS,C,PN,PE,PD,VN,VE,VD");
+    w.message_type("ATT", "Qdddddd", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw");
+    w.message_type("IMU", "QBddd", "TimeUS,I,GyrX,GyrY,GyrZ");
+    w.message_type("RATE", "Qdd", "TimeUS,DesR,DesY");
+    w.message_type("PSCD", "Qdd", "TimeUS,TPD,DVD");
+    w.message_type("BAT", "QBd", "TimeUS,I,Volt");
+    for s in &log.segments {
+        for k in 0..s.len() {
+            let us = (s.t[k] * 1e6).round() as u64;
+            let (x, u) = (s.x[k], s.u[k]);
+            let e = [x[3], x[4], x[5]];
+            let ned = ned_euler(e);
+            let heading = (ned[2] * deg).rem_euclid(360.0);
+            w.write("XKF1", us, &[0.0, x[1], x[0], -x[2], x[7], x[6], -x[8]]);
+            w.write("XKF1", us, &[1.0, 99.0, 99.0, 99.0, 99.0, 99.0, 99.0]);
+            w.write(
+                "ATT",
+                us,
+                &[u[1] * deg, ned[0] * deg, -u[2] * deg, ned[1] * deg, 0.0, heading],
+            );
+            let g = frd_rates([x[9], x[10], x[11]], e);
+            w.write("IMU", us, &[0.0, g[0], g[1], g[2]]);
+            w.write("IMU", us, &[1.0, 5.0, 5.0, 5.0]);
+            w.write("RATE", us, &[0.0, -u[3] * deg]);
+            w.write("PSCD", us, &[0.0, -u[0]]);
+            w.write("BAT", us, &[0.0, s.battery_voltage.as_ref().map_or(16.0, |b| b[k])]);
+        }
+    }
+    w
+}
+
+#[test]
+fn dataflash_round_trips_the_simulated_flight() {
+    let (_, sim) = simulated();
+    let w = ardupilot_bin(&sim);
+    let profile = Profile::resolve("ardupilot").unwrap();
+    let imported = import_bytes(
+        "f.bin",
+        Some(Format::DataFlash),
+        &w.bytes,
+        &profile,
+        &ImportOptions::default(),
+    )
+    .unwrap();
+    assert!(
+        imported
+            .report()
+            .contains("`XKF1` has several instances: instance 0 is used"),
+        "{}",
+        imported.report()
+    );
+    let log = parse_log(&imported.to_csv(), "f.csv").unwrap();
+    let (dt, dx, du) = max_diff(&sim, &log);
+    eprintln!("DataFlash round trip: max |Δt| {dt:e} s, max |Δx| {dx:e}, max |Δu| {du:e}");
+    assert!(dt <= 1e-9 && dx <= 1e-9 && du <= 1e-9, "{dt:e} {dx:e} {du:e}");
+}
+
+#[test]
+fn dataflash_errors_say_where() {
+    let (_, sim) = simulated();
+    let w = ardupilot_bin(&sim);
+    let (at, _) = w.offsets[2000];
+    // Cut inside a record.
+    let cut = &w.bytes[..at + 7];
+    let e = import_with("ardupilot", cut, "cut.bin", &ImportOptions::default()).unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::Corrupt);
+    assert!(
+        e.message
+            .contains(&format!("the file is truncated: the record at byte {at} needs")),
+        "{e}"
+    );
+    let partial = ImportOptions {
+        partial: true,
+        ..ImportOptions::default()
+    };
+    assert!(import_with("ardupilot", cut, "cut.bin", &partial).unwrap().rows() >= 240);
+    // A corrupt record head.
+    let mut bad = w.bytes.clone();
+    bad[at] = 0x00;
+    let e = import_with("ardupilot", &bad, "bad.bin", &ImportOptions::default()).unwrap_err();
+    assert!(
+        e.message.contains(&format!(
+            "the file is corrupt at byte {at}: 00 95 where a record head A3 95 should be"
+        )),
+        "{e}"
+    );
+    // A missing message lists what the log has.
+    let mut profile = Profile::resolve("ardupilot").unwrap();
+    profile.inputs.u_vz.topic = "CTUN".into();
+    let e = import_bytes(
+        "f.bin",
+        Some(Format::DataFlash),
+        &w.bytes,
+        &profile,
+        &ImportOptions::default(),
+    )
+    .unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::MissingTopic);
+    assert!(
+        e.message
+            .contains("topic `CTUN` is not in this ArduPilot DataFlash file; it has `ATT`, `BAT`, `FMT`"),
         "{e}"
     );
 }
