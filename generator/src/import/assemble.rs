@@ -67,6 +67,9 @@ pub struct Summary {
 
 pub const GROUPS: [&str; 4] = ["position", "velocity", "attitude", "rates"];
 
+/// The most rows a uniform grid may have (a guard against a mistyped `--rate`).
+pub const MAX_ROWS: f64 = 2e7;
+
 /// A channel: sample times and per-sample values (already converted where that needs no other
 /// channel).
 struct Channel<const N: usize> {
@@ -383,8 +386,19 @@ pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result
                 ts.dedup();
                 ts
             }
-            Some(_) => {
-                let n = ((e - a) / period + 1e-6).floor() as usize;
+            Some(hz) => {
+                let n = ((e - a) / period + 1e-6).floor();
+                if n > MAX_ROWS {
+                    return Err(err(
+                        file,
+                        ImportErrorKind::NoData,
+                        format!(
+                            "--rate {hz} Hz over {} s would give {n} rows (at most {MAX_ROWS})",
+                            e - a
+                        ),
+                    ));
+                }
+                let n = n as usize;
                 (0..=n).map(|k| a + k as f64 * period).collect()
             }
         };

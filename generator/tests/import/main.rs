@@ -940,6 +940,24 @@ fn identify_on_the_imported_ulog_and_mcap_gives_the_csv_model() {
         );
         assert!(worst <= 1e-6, "{what}: {worst:e}");
     }
+    // evaluate reads the recording with --profile, and scores the model as on the CSV.
+    let model = tmp.path().join("sim.json");
+    let scores: Vec<String> = [
+        vec!["--log", csv_path.to_str().unwrap()],
+        vec!["--log", ulg.to_str().unwrap(), "--profile", "px4"],
+    ]
+    .iter()
+    .map(|log| {
+        let mut args = vec!["evaluate", "--model", model.to_str().unwrap()];
+        args.extend(log);
+        let r = uavgen(&args);
+        assert!(r.status.success(), "{}", stderr(&r));
+        String::from_utf8_lossy(&r.stdout)
+            .replace(ulg.to_str().unwrap(), "LOG")
+            .replace(csv_path.to_str().unwrap(), "LOG")
+    })
+    .collect();
+    assert_eq!(scores[0], scores[1]);
     // A non-CSV log without --profile is refused with a hint.
     let r = uavgen(&[
         "evaluate",
