@@ -958,6 +958,24 @@ fn identify_on_the_imported_ulog_and_mcap_gives_the_csv_model() {
     })
     .collect();
     assert_eq!(scores[0], scores[1]);
+    // diagnose takes --profile the same way.
+    let dir = tmp.path().join("diagnosis");
+    let r = uavgen(&[
+        "diagnose",
+        "--model",
+        model.to_str().unwrap(),
+        "--log",
+        ulg.to_str().unwrap(),
+        "--profile",
+        "px4",
+        "--out",
+        dir.to_str().unwrap(),
+        "--effects",
+        "latency",
+        "--no-where",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    assert!(dir.join("report.md").exists());
     // A non-CSV log without --profile is refused with a hint.
     let r = uavgen(&[
         "evaluate",
