@@ -6,7 +6,8 @@
 //! records itself, which also gives every error a byte offset.
 //!
 //! Read: connection records (topic, type, message definition) and message-data records inside
-//! uncompressed chunks; the index section is not needed. bz2 or lz4 chunks are reported
+//! uncompressed chunks; the index section is not needed. A chunk cut by the end of the file (the
+//! recorder was killed while writing it) gives its complete messages. bz2 or lz4 chunks are reported
 //! (`rosbag decompress` writes an uncompressed copy). Messages are decoded from the connection's
 //! message definition by [`rosmsg`](super::rosmsg) (ROS 1 wire format). Time: `header.stamp` (with
 //! `clock: header`) or the record's receive time.
@@ -34,6 +35,8 @@ struct RawRecord<'a> {
     next: usize,
     fields: HashMap<&'a str, &'a [u8]>,
     data: &'a [u8],
+    /// Set when the file ends inside the data: `data` is what there is.
+    cut: Option<String>,
 }
 
 impl RawRecord<'_> {
@@ -86,10 +89,15 @@ fn record(bytes: &[u8], pos: usize, base: usize) -> Result<RawRecord<'_>, (bool,
     let data_len =
         u32_at(pos + 4 + header_len).ok_or((true, format!("the record at byte {at} is cut off in its data length")))?;
     let start = pos + 8 + header_len;
-    let data = bytes.get(start..start + data_len).ok_or((
-        true,
-        format!("the record at byte {at} announces {data_len} bytes of data, the file ends first"),
-    ))?;
+    let (data, cut) = match bytes.get(start..start + data_len) {
+        Some(d) => (d, None),
+        None => (
+            bytes.get(start..).unwrap_or(&[]),
+            Some(format!(
+                "the record at byte {at} announces {data_len} bytes of data, the file ends first"
+            )),
+        ),
+    };
     let fields = fields(header).map_err(|e| (false, format!("the record at byte {at}: {e}")))?;
     Ok(RawRecord {
         at,
@@ -97,6 +105,7 @@ fn record(bytes: &[u8], pos: usize, base: usize) -> Result<RawRecord<'_>, (bool,
         next: start + data_len,
         fields,
         data,
+        cut,
     })
 }
 
@@ -141,6 +150,13 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
             }
         };
         pos = r.next;
+        // A record cut by the end of the file: a chunk's complete messages are kept (a recorder
+        // killed while writing it), anything else ends the walk.
+        let cut = r.cut.as_ref().map(|m| format!("the file is truncated: {m}"));
+        if cut.is_some() && r.op() != Some(OP_CHUNK) {
+            rec.broken = cut;
+            break;
+        }
         let inner: Vec<(&[u8], usize)> = match r.op() {
             Some(OP_CHUNK) => {
                 let compression = r.fields.get("compression").copied().unwrap_or(b"none");
@@ -167,9 +183,14 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
             let mut p = 0;
             while p < chunk.len() {
                 let m = match record(chunk, p, base) {
-                    Ok(m) => m,
+                    Ok(m) if m.cut.is_none() => m,
+                    Ok(m) => {
+                        let inner = m.cut.unwrap_or_default();
+                        rec.broken = Some(cut.unwrap_or_else(|| format!("inside the chunk at byte {}: {inner}", r.at)));
+                        break 'outer;
+                    }
                     Err((_, m)) => {
-                        rec.broken = Some(format!("inside the chunk at byte {}: {m}", r.at));
+                        rec.broken = Some(cut.unwrap_or_else(|| format!("inside the chunk at byte {}: {m}", r.at)));
                         break 'outer;
                     }
                 };
@@ -235,6 +256,10 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
                     _ => {}
                 }
             }
+        }
+        if let Some(c) = cut {
+            rec.broken = Some(c);
+            break;
         }
     }
     for (topic, b) in builders {

