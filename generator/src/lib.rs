@@ -12,6 +12,7 @@ pub mod diagnose;
 pub mod discretize;
 pub mod evaluate;
 pub mod identify;
+pub mod import;
 pub mod ir;
 pub mod logs;
 pub mod metrics;

@@ -39,6 +39,8 @@ enum Command {
     Simulate(cli::simulate::SimulateArgs),
     /// Closed-loop MPC on the plant simulator along one of the paper's trajectories (docs/track.md).
     Track(cli::track::TrackArgs),
+    /// Import a PX4 ULog, MCAP (ROS 2), ROS 1 bag or ArduPilot DataFlash recording as a flight log CSV, mapped by a profile (docs/import.md).
+    Import(cli::import::ImportArgs),
     /// Diagnose a model on flight logs: where it parts from the data, which effect explains it, the corrected model (docs/diagnose.md).
     Diagnose(cli::diagnose::DiagnoseArgs),
 }
@@ -165,6 +167,7 @@ fn main() -> ExitCode {
             Err(e) => Err(e),
         },
         Some(Command::Diagnose(args)) => cli::diagnose::run(args),
+        Some(Command::Import(args)) => cli::import::run(args),
         None => generate(cli.generate),
     };
     match result {

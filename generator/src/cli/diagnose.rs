@@ -18,6 +18,10 @@ pub struct DiagnoseArgs {
     /// cross-validation over the training logs.
     #[arg(long = "holdout")]
     holdout: Vec<PathBuf>,
+    /// How to read --log / --holdout files that are not CSV (PX4 ULog, …): a preset (px4, mavros,
+    /// dji-osdk-ros, ardupilot) or a profile file (docs/import.md).
+    #[arg(long)]
+    profile: Option<String>,
     /// Output directory: report.md, report.json, corrected.json and the plots.
     #[arg(long)]
     out: PathBuf,
@@ -193,10 +197,10 @@ fn closed_loop(
     }
 }
 
-fn read_logs(paths: &[PathBuf]) -> Result<Vec<uavgen::logs::FlightLog>, String> {
+fn read_logs(paths: &[PathBuf], profile: Option<&str>) -> Result<Vec<uavgen::logs::FlightLog>, String> {
     let mut logs = Vec::new();
     for path in paths {
-        let log = uavgen::logs::read_log(path).map_err(|e| e.to_string())?;
+        let log = uavgen::logs::load_any(path, profile).map_err(|e| e.to_string())?;
         for w in log.report.warnings() {
             eprintln!("warning: {}: {w}", path.display());
         }
@@ -243,8 +247,8 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     }
     let model = uavgen::load(&model_path).map_err(|e| e.to_string())?;
     let text = std::fs::read_to_string(&model_path).map_err(|e| format!("{}: {e}", model_path.display()))?;
-    let train = read_logs(&args.logs)?;
-    let holdout = read_logs(&args.holdout)?;
+    let train = read_logs(&args.logs, args.profile.as_deref())?;
+    let holdout = read_logs(&args.holdout, args.profile.as_deref())?;
     let options = DiagnoseOptions {
         savgol,
         residual: if args.pointwise {

@@ -9,9 +9,13 @@ pub struct EvaluateArgs {
     /// Model file (uavgen-model/1).
     #[arg(long)]
     model: PathBuf,
-    /// Flight log to evaluate on; repeat for several.
+    /// Flight log to evaluate on (CSV, or a recording imported with --profile); repeat for several.
     #[arg(long = "log", required = true)]
     logs: Vec<PathBuf>,
+    /// How to read --log files that are not CSV (PX4 ULog, …): a preset (px4, mavros,
+    /// dji-osdk-ros, ardupilot) or a profile file (docs/import.md).
+    #[arg(long)]
+    profile: Option<String>,
     /// Free-run horizon in samples (the MPC's).
     #[arg(long, default_value_t = 30)]
     horizon: usize,
@@ -40,7 +44,7 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
     let mut logs = Vec::new();
     for path in &args.logs {
-        logs.push(uavgen::logs::read_log(path).map_err(|e| e.to_string())?);
+        logs.push(uavgen::logs::load_any(path, args.profile.as_deref()).map_err(|e| e.to_string())?);
     }
     let options = EvaluateOptions {
         horizon: args.horizon,

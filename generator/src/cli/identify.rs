@@ -47,9 +47,13 @@ pub struct IdentifyArgs {
     /// Identification method.
     #[arg(long, value_enum)]
     method: Method,
-    /// Flight log (LOG_FORMAT.md CSV); repeat for several.
+    /// Flight log (LOG_FORMAT.md CSV, or a recording imported with --profile); repeat for several.
     #[arg(long = "log", required = true)]
     logs: Vec<PathBuf>,
+    /// How to read --log files that are not CSV (PX4 ULog, …): a preset (px4, mavros,
+    /// dji-osdk-ros, ardupilot) or a profile file (docs/import.md).
+    #[arg(long)]
+    profile: Option<String>,
     /// Output model file.
     #[arg(long)]
     out: PathBuf,
@@ -265,7 +269,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     }
     let mut logs = Vec::new();
     for path in &args.logs {
-        let log = uavgen::logs::read_log(path).map_err(|e| e.to_string())?;
+        let log = uavgen::logs::load_any(path, args.profile.as_deref()).map_err(|e| e.to_string())?;
         for w in log.report.warnings() {
             eprintln!("warning: {}: {w}", path.display());
         }

@@ -4,6 +4,7 @@
 pub mod diagnose;
 pub mod evaluate;
 pub mod identify;
+pub mod import;
 pub mod simulate;
 pub mod track;
 

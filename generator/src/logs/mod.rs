@@ -165,3 +165,59 @@ pub fn parse_log(text: &str, label: &str) -> Result<FlightLog, LogError> {
         report,
     })
 }
+
+/// Why [`load_any`] failed: the CSV reader's error or the importer's.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum LoadError {
+    Log(LogError),
+    Import(crate::import::ImportError),
+}
+
+impl std::fmt::Display for LoadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LoadError::Log(e) => e.fmt(f),
+            LoadError::Import(e) => e.fmt(f),
+        }
+    }
+}
+
+impl std::error::Error for LoadError {}
+
+/// Read a flight log of any format uavgen reads: a CSV of the contract as [`read_log`] does, or
+/// a PX4 ULog / MCAP / ROS 1 bag / DataFlash file imported with `profile` (a preset name or a
+/// profile file; docs/import.md) at the position topic's own time stamps. What `--log` and
+/// `--profile` of identify, evaluate and diagnose do.
+pub fn load_any(path: &Path, profile: Option<&str>) -> Result<FlightLog, LoadError> {
+    use crate::import::{Format, ImportError, ImportErrorKind, ImportOptions, Profile};
+    let label = path.display().to_string();
+    let format = match Format::from_extension(path) {
+        Some(f) => Some(f),
+        None => {
+            // Look at the first bytes of a file without a known extension.
+            let mut head = [0u8; 16];
+            let n = std::fs::File::open(path)
+                .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+                .unwrap_or(0);
+            Format::sniff(&head[..n])
+        }
+    };
+    let format = match format {
+        None | Some(Format::Csv) => return read_log(path).map_err(LoadError::Log),
+        Some(f) => f,
+    };
+    let Some(profile) = profile else {
+        return Err(LoadError::Import(ImportError::new(
+            &label,
+            ImportErrorKind::Profile,
+            format!(
+                "a {} file needs --profile: a preset ({}) or a profile file (docs/import.md)",
+                format.name(),
+                crate::import::PRESETS.map(|(n, _)| n).join(", ")
+            ),
+        )));
+    };
+    let profile = Profile::resolve(profile).map_err(LoadError::Import)?;
+    let imported = crate::import::import_file(path, &profile, &ImportOptions::default()).map_err(LoadError::Import)?;
+    parse_log(&imported.to_csv(), &label).map_err(LoadError::Log)
+}
