@@ -168,7 +168,7 @@ fn diagnose_writes_the_report_and_a_loadable_corrected_model() {
     let o = uavgen(&["check", "--model", s(&out.join("corrected.json"))]);
     assert!(o.status.success(), "{}", stderr(&o));
 
-    // A model that already has corrections is refused.
+    // A model that already has corrections other than an input response is refused.
     let o = uavgen(&[
         "diagnose",
         "--model",
@@ -180,11 +180,33 @@ fn diagnose_writes_the_report_and_a_loadable_corrected_model() {
     ]);
     assert!(!o.status.success());
     assert!(
-        stderr(&o).contains("already has a `corrections` block"),
+        stderr(&o).contains("has a `corrections` block with more than an input response"),
         "{}",
         stderr(&o)
     );
     assert!(!tmp.path().join("again").exists());
+
+    // One with only an input response (what `identify --input-delay auto` writes) is diagnosed
+    // with it as part of the base, and corrected.json keeps it.
+    let mut delayed = original.clone();
+    delayed["corrections"] = serde_json::json!({"latency": {"u_vz": 0.1}});
+    let delayed_path = tmp.path().join("delayed.json");
+    fs::write(&delayed_path, serde_json::to_string_pretty(&delayed).unwrap()).unwrap();
+    let o = uavgen(&[
+        "diagnose",
+        "--model",
+        s(&delayed_path),
+        "--log",
+        s(&train),
+        "--out",
+        s(&tmp.path().join("delayed")),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let c: Value =
+        serde_json::from_str(&fs::read_to_string(tmp.path().join("delayed/corrected.json")).unwrap()).unwrap();
+    assert!(c["corrections"]["latency"]["u_vz"].as_f64().unwrap() >= 0.1, "{c}");
+    let r = fs::read_to_string(tmp.path().join("delayed/report.md")).unwrap();
+    assert!(r.contains("input response of its own (u_vz delay 0.1000 s)"), "{r}");
 }
 
 #[test]
