@@ -26,7 +26,7 @@ fi
 
 echo "== no_std crates build for thumbv7em-none-eabihf"
 cargo build --release -q --target thumbv7em-none-eabihf \
-    -p uavgen-templates -p uavgen-runtime -p pd_paper -p pd_hover -p pd_hover_f32 -p sindy_m100 -p pd_m100
+    -p uavgen-templates -p uavgen-runtime -p pd_paper -p pd_hover -p pd_hover_f32 -p sindy_m100 -p pd_m100 -p sindy_m100_riccati
 
 echo "== the C ABI staticlib builds for thumbv7em-none-eabihf (docs/c-api.md)"
 cargo build --release -q --target thumbv7em-none-eabihf -p sindy_m100_capi

@@ -241,40 +241,51 @@ comparisons!(pd_m100_model, pd_m100, "pd_m100", hovers: true);
 // The paper's ξ do not hold the aircraft up: with saturated inputs the large-residual
 // Gauss-Newton iteration cycles (in both solvers alike), so only agreement is checked.
 comparisons!(pd_paper_model, pd_paper, "pd_paper", hovers: false);
+// The stage-wise solver (`--qp riccati`) on the same model and problem.
+comparisons!(sindy_riccati, sindy_m100_riccati, "sindy_m100", hovers: true);
 
-#[test]
-fn f32_solver_tracks_the_generic_f64_solver() {
-    use pd_hover_f32::{Mpc, DT, N, NU, NX, SUBSTEPS};
-    let mut reference_solver = generic("pd_hover", f64::from(DT), SUBSTEPS, N);
-    let mut worst: f64 = 0.0;
-    for (instance, (x, _)) in envelope_points(200, 9).into_iter().enumerate() {
-        let mut x0 = [0.0f32; NX];
-        for i in 0..NX {
-            x0[i] = x[i] as f32;
-        }
-        let mut reference = [[0.0f32; NX]; N + 1];
-        for (k, row) in reference.iter_mut().enumerate() {
-            let p = trajectory("circular", k as f64 * f64::from(DT) + instance as f64);
-            for i in 0..3 {
-                row[i] = p[i] as f32;
+macro_rules! f32_comparison {
+    ($name:ident, $krate:ident) => {
+        #[test]
+        fn $name() {
+            use $krate::{Mpc, DT, N, NU, NX, SUBSTEPS};
+            let mut reference_solver = generic("pd_hover", f64::from(DT), SUBSTEPS, N);
+            let mut worst: f64 = 0.0;
+            for (instance, (x, _)) in envelope_points(200, 9).into_iter().enumerate() {
+                let mut x0 = [0.0f32; NX];
+                for i in 0..NX {
+                    x0[i] = x[i] as f32;
+                }
+                let mut reference = [[0.0f32; NX]; N + 1];
+                for (k, row) in reference.iter_mut().enumerate() {
+                    let p = trajectory("circular", k as f64 * f64::from(DT) + instance as f64);
+                    for i in 0..3 {
+                        row[i] = p[i] as f32;
+                    }
+                }
+                let mut mpc = Mpc::new();
+                mpc.solve(&x0, &reference);
+                reference_solver.set_guess(vec![vec![0.0; NX]; N + 1], vec![vec![0.0; NU]; N]);
+                let x0d: Vec<f64> = x0.iter().map(|&v| f64::from(v)).collect();
+                let rd: Vec<Vec<f64>> = reference
+                    .iter()
+                    .map(|r| r.iter().map(|&v| f64::from(v)).collect())
+                    .collect();
+                reference_solver.rti_step(&x0d, &rd).unwrap();
+                for k in 0..N {
+                    for i in 0..NU {
+                        let d = (f64::from(mpc.planned_inputs()[k][i]) - reference_solver.planned_inputs()[k][i]).abs();
+                        worst = worst.max(d / INPUT_BOUNDS[i]);
+                    }
+                }
             }
+            eprintln!(
+                "{}: worst planned-input difference (relative to the bound) {worst:.1e}",
+                stringify!($krate)
+            );
+            assert!(worst <= 1e-3, "f32 plans differ by {worst:e}");
         }
-        let mut mpc = Mpc::new();
-        mpc.solve(&x0, &reference);
-        reference_solver.set_guess(vec![vec![0.0; NX]; N + 1], vec![vec![0.0; NU]; N]);
-        let x0d: Vec<f64> = x0.iter().map(|&v| f64::from(v)).collect();
-        let rd: Vec<Vec<f64>> = reference
-            .iter()
-            .map(|r| r.iter().map(|&v| f64::from(v)).collect())
-            .collect();
-        reference_solver.rti_step(&x0d, &rd).unwrap();
-        for k in 0..N {
-            for i in 0..NU {
-                let d = (f64::from(mpc.planned_inputs()[k][i]) - reference_solver.planned_inputs()[k][i]).abs();
-                worst = worst.max(d / INPUT_BOUNDS[i]);
-            }
-        }
-    }
-    eprintln!("pd_hover_f32: worst planned-input difference (relative to the bound) {worst:.1e}");
-    assert!(worst <= 1e-3, "f32 plans differ by {worst:e}");
+    };
 }
+
+f32_comparison!(f32_solver_tracks_the_generic_f64_solver, pd_hover_f32);

@@ -75,3 +75,9 @@ fn pd_hover_tracks_the_circle() {
     let rmse = closed_loop!(pd_hover);
     assert!(rmse < 1.0);
 }
+
+#[test]
+fn sindy_riccati_tracks_the_circle() {
+    let rmse = closed_loop!(sindy_m100_riccati);
+    assert!(rmse < 1.0);
+}

@@ -6,7 +6,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use uavgen::codegen::write::write_all;
-use uavgen::codegen::{default_crate_name, Float, GenerateOptions};
+use uavgen::codegen::{default_crate_name, Float, GenerateOptions, QpChoice};
 use uavgen::model::pysindy::{import, ImportOptions, KinematicRows};
 
 #[derive(Parser)]
@@ -101,12 +101,25 @@ struct GenerateArgs {
     /// Output directory (default: ./<crate name>).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// QP solver of the generated crate: `condensed` (dense box QP in the N·NU inputs, primal
+    /// active set), `riccati` (stage-wise primal-dual interior point, Riccati recursion, at most
+    /// max_ipm_iterations iterations) or `auto` (the one whose fixed work per step is smaller in
+    /// flops, Riccati also when the condensed Hessian would not fit 64 KB; docs/mpc.md).
+    #[arg(long, value_enum, default_value_t = QpArg::Auto)]
+    qp: QpArg,
     /// MPC options file: weights, input bounds, QP limits (default: the paper's but q yaw 1, r u_yaw_rate 10; examples/mpc_paper.json has the paper's; see docs/mpc.md).
     #[arg(long)]
     mpc: Option<PathBuf>,
     /// Also emit a C ABI: include/<name>.h and the capi/ package (staticlib lib<name>_capi.a) for C/C++ flight stacks (docs/c-api.md).
     #[arg(long)]
     c_api: bool,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum QpArg {
+    Auto,
+    Condensed,
+    Riccati,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -197,6 +210,11 @@ fn generate(args: GenerateArgs) -> Result<(), String> {
         },
         crate_name: args.crate_name,
         c_api: args.c_api,
+        qp: match args.qp {
+            QpArg::Auto => QpChoice::Auto,
+            QpArg::Condensed => QpChoice::Condensed,
+            QpArg::Riccati => QpChoice::Riccati,
+        },
         ..GenerateOptions::default()
     };
     options.validate().map_err(|e| e.to_string())?;

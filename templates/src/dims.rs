@@ -33,6 +33,8 @@ pub const INPUT_DELAY: [Real; NU] = [0.0];
 pub const INPUT_DELAY_SAMPLES: [usize; NU] = [0];
 /// Hard cap on active-set iterations per QP.
 pub const MAX_QP_ITERATIONS: usize = 200;
+/// Hard cap on interior-point iterations per QP of the stage-wise (Riccati) solver.
+pub const MAX_IPM_ITERATIONS: usize = 30;
 /// Trust region of the guess, |x̄ᵢ| ≤ TRUST_BOUND[i] (`Real::INFINITY`: none): twice the
 /// generator's envelope on roll, pitch and the body rates. A guess that leaves it is replaced by
 /// the rollout of its inputs in `prepare` (docs/mpc.md).

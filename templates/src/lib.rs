@@ -15,7 +15,9 @@ mod dims;
 pub mod math;
 pub mod model;
 pub mod mpc;
+pub mod mpc_riccati;
 pub mod qp;
+pub mod riccati;
 pub mod rk4;
 
 pub use dims::*;

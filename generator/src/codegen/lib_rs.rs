@@ -1,6 +1,6 @@
 //! Emits `lib.rs` (crate docs, names, re-exports) and the values spliced into `dims.rs`.
 
-use super::GenerateOptions;
+use super::{GenerateOptions, QpMethod};
 use crate::ir::ModelIr;
 use crate::model::Model;
 use crate::mpc_options::MpcOptions;
@@ -53,12 +53,13 @@ pub fn dims_values(
         ("INPUT_DELAY", array(delays)),
         ("INPUT_DELAY_SAMPLES", quote!([#(#delay_samples),*])),
         ("MAX_QP_ITERATIONS", lit(mpc.max_qp_iterations)),
+        ("MAX_IPM_ITERATIONS", lit(mpc.max_ipm_iterations)),
         ("TRUST_BOUND", quote!([#(#trust),*])),
         ("REGULARISATION", float_literal(mpc.regularisation, options.float)),
     ])
 }
 
-pub fn emit(model: &Model, ir: &ModelIr) -> TokenStream {
+pub fn emit(model: &Model, ir: &ModelIr, qp: QpMethod) -> TokenStream {
     let states = &ir.state_names;
     let inputs = &ir.input_names;
     let name = &model.name;
@@ -82,6 +83,17 @@ pub fn emit(model: &Model, ir: &ModelIr) -> TokenStream {
             }
         ));
     }
+    doc.push_str(&format!("\n\nQP solver: `{}` (`--qp`, docs/mpc.md).", qp.name()));
+    let qp_module = match qp {
+        QpMethod::Condensed => quote! {
+            #[rustfmt::skip]
+            mod qp;
+        },
+        QpMethod::Riccati => quote! {
+            #[rustfmt::skip]
+            mod riccati;
+        },
+    };
     quote! {
         #![doc = #doc]
         #![no_std]
@@ -98,8 +110,7 @@ pub fn emit(model: &Model, ir: &ModelIr) -> TokenStream {
         mod model;
         #[rustfmt::skip]
         mod mpc;
-        #[rustfmt::skip]
-        mod qp;
+        #qp_module
         #[rustfmt::skip]
         mod rk4;
 

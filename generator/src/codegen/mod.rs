@@ -36,7 +36,72 @@ pub struct GenerateOptions {
     pub mpc: Option<MpcOptions>,
     /// Also emit the C ABI: `include/<name>.h` and the `capi/` staticlib package (docs/c-api.md).
     pub c_api: bool,
+    /// Which QP solver the crate carries (`--qp`).
+    pub qp: QpChoice,
 }
+
+/// `--qp`: the QP solver of a generated crate, or `Auto` for the rule of [`QpChoice::resolve`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum QpChoice {
+    #[default]
+    Auto,
+    Condensed,
+    Riccati,
+}
+
+/// The QP solver a generated crate carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum QpMethod {
+    /// Condensed dense box QP in the N·NU inputs, primal active set (templates/src/qp.rs, mpc.rs).
+    Condensed,
+    /// Stage-wise primal-dual interior point with a Riccati recursion (templates/src/riccati.rs,
+    /// mpc_riccati.rs).
+    Riccati,
+}
+
+impl QpMethod {
+    pub fn name(self) -> &'static str {
+        match self {
+            QpMethod::Condensed => "condensed",
+            QpMethod::Riccati => "riccati",
+        }
+    }
+}
+
+impl QpChoice {
+    /// The solver for a problem of `nx` states, `nu` inputs and horizon `n`. `Auto` compares the
+    /// flops of a typical step's QP work (docs/mpc.md, "Choosing the QP solver"): condensed,
+    /// condensing N²/2·NU·NX² plus the Cholesky of the N·NU Hessian (N·NU)³/6 multiply-adds;
+    /// riccati, `RICCATI_ITERATIONS` Riccati factorisations of N·(2 NX³ + 3 NX² NU) each. The
+    /// cheaper one is chosen (the condensed one on a tie).
+    pub fn resolve(self, nx: usize, nu: usize, n: usize) -> QpMethod {
+        match self {
+            QpChoice::Condensed => QpMethod::Condensed,
+            QpChoice::Riccati => QpMethod::Riccati,
+            QpChoice::Auto => {
+                let (condensed, riccati) = qp_flops(nx, nu, n);
+                if riccati < condensed {
+                    QpMethod::Riccati
+                } else {
+                    QpMethod::Condensed
+                }
+            }
+        }
+    }
+}
+
+/// Multiply-adds of a typical step's QP work, (condensed, riccati), for the `--qp auto` rule.
+pub fn qp_flops(nx: usize, nu: usize, n: usize) -> (f64, f64) {
+    let (nx, nu, n) = (nx as f64, nu as f64, n as f64);
+    let nv = n * nu;
+    let condensed = n * n / 2.0 * nu * nx * nx + nv * nv * nv / 6.0;
+    let riccati = RICCATI_ITERATIONS * n * (2.0 * nx * nx * nx + 3.0 * nx * nx * nu);
+    (condensed, riccati)
+}
+
+/// Interior-point iterations of a typical step, for the `--qp auto` rule (about the median
+/// measured on the shipped models, docs/benchmarks.md).
+const RICCATI_ITERATIONS: f64 = 10.0;
 
 impl Default for GenerateOptions {
     fn default() -> Self {
@@ -49,6 +114,7 @@ impl Default for GenerateOptions {
             envelope: Envelope::default(),
             mpc: None,
             c_api: false,
+            qp: QpChoice::Auto,
         }
     }
 }
@@ -160,7 +226,8 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         }
         None => MpcOptions::defaults(model),
     };
-    let head = header::lines(model, options, substeps, &mpc);
+    let qp = options.qp.resolve(ir.nx, ir.nu, options.horizon);
+    let head = header::lines(model, options, substeps, &mpc, qp);
     let rs_header = header::rust(&head);
 
     let dims = splice::specialise_dims(
@@ -180,7 +247,7 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         ),
         (
             PathBuf::from("src/lib.rs"),
-            rs_header.clone() + &format_file(lib_rs::emit(model, &ir), "lib.rs")?,
+            rs_header.clone() + &format_file(lib_rs::emit(model, &ir, qp), "lib.rs")?,
         ),
         (
             PathBuf::from("src/dims.rs"),
@@ -195,11 +262,14 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
             rs_header.clone() + &prettyplease::unparse(&splice::math(&used_math)),
         ),
     ];
-    for (name, source) in [
-        ("src/rk4.rs", splice::RK4_RS),
-        ("src/qp.rs", splice::QP_RS),
-        ("src/mpc.rs", splice::MPC_RS),
-    ] {
+    let solver = match qp {
+        QpMethod::Condensed => [("src/qp.rs", splice::QP_RS), ("src/mpc.rs", splice::MPC_RS)],
+        QpMethod::Riccati => [
+            ("src/riccati.rs", splice::RICCATI_RS),
+            ("src/mpc.rs", splice::MPC_RICCATI_RS),
+        ],
+    };
+    for (name, source) in [("src/rk4.rs", splice::RK4_RS)].into_iter().chain(solver) {
         files.push((
             PathBuf::from(name),
             rs_header.clone() + &prettyplease::unparse(&splice::template(source)),

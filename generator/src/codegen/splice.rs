@@ -16,6 +16,8 @@ pub const MATH_RS: &str = include_str!("../../../templates/src/math.rs");
 pub const RK4_RS: &str = include_str!("../../../templates/src/rk4.rs");
 pub const QP_RS: &str = include_str!("../../../templates/src/qp.rs");
 pub const MPC_RS: &str = include_str!("../../../templates/src/mpc.rs");
+pub const RICCATI_RS: &str = include_str!("../../../templates/src/riccati.rs");
+pub const MPC_RICCATI_RS: &str = include_str!("../../../templates/src/mpc_riccati.rs");
 
 /// Constants of `dims.rs` defined by expressions of the others (kept as written).
 const DERIVED: &[&str] = &["NZ", "NV"];
