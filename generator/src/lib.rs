@@ -22,6 +22,7 @@ pub mod selfcheck;
 pub mod sim;
 pub mod symbolic;
 pub mod track;
+pub mod validate;
 
 pub use codegen::{generate, Float, GenerateOptions, GeneratedCrate};
 pub use ir::ModelIr;

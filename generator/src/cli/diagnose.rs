@@ -105,9 +105,7 @@ fn self_check(args: &DiagnoseArgs) -> Result<(), String> {
         },
         ..SelfCheckOptions::default()
     };
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
-    }
+    super::refuse_existing(&args.out, args.force)?;
     let bar = super::identify::progress_bar(options.cases.len(), "cases");
     let check = selfcheck::run(&args.plants, &options, &mut |done, _, case| {
         bar.set_position(done as u64);
@@ -212,9 +210,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     let (Some(model_path), false) = (args.model.clone(), args.logs.is_empty()) else {
         return Err("--model and --log are required (or --self-check)".into());
     };
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
-    }
+    super::refuse_existing(&args.out, args.force)?;
     let savgol = SavGol::new(args.savgol_window, args.savgol_order)
         .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
     let candidates = match &args.effects {

@@ -102,9 +102,7 @@ fn write(path: &Path, text: &str) -> Result<(), String> {
 
 /// Runs `uavgen track`; Ok carries the exit status of the verdicts (0, 3 or 4).
 pub fn run(args: TrackArgs) -> Result<ExitCode, String> {
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
-    }
+    super::refuse_existing(&args.out, args.force)?;
     if !(args.duration.is_finite() && args.duration > 0.0) {
         return Err(format!(
             "--duration: must be a positive number of seconds, got {}",

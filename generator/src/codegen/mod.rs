@@ -57,6 +57,8 @@ pub enum GenerateError {
     Substeps(#[from] SubstepError),
     #[error("template: {0}")]
     Template(String),
+    #[error("{0}")]
+    Constant(#[from] crate::symbolic::NonFiniteConstant),
 }
 
 /// The files of a generated crate, in memory.
@@ -161,10 +163,10 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
 
     let dims = splice::specialise_dims(
         options.float.name(),
-        &lib_rs::dims_values(&ir, options, substeps, &mpc, &model.input_delays()),
+        &lib_rs::dims_values(&ir, options, substeps, &mpc, &model.input_delays())?,
     )
     .map_err(GenerateError::Template)?;
-    let (model_tokens, used_math) = model_rs::emit(&ir, options.float);
+    let (model_tokens, used_math) = model_rs::emit(&ir, options.float)?;
     let mut files = vec![
         (
             PathBuf::from("Cargo.toml"),
