@@ -47,6 +47,18 @@ pub fn dims_values(
             }
         })
         .collect::<Result<Vec<_>, _>>()?;
+    let plausible = options
+        .envelope
+        .plausibility_bounds(&ir.state_names)
+        .into_iter()
+        .map(|b| {
+            if b.is_finite() {
+                float_literal(b, options.float)
+            } else {
+                Ok(quote!(Real::INFINITY))
+            }
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(BTreeMap::from([
         ("NX", lit(ir.nx)),
         ("NU", lit(ir.nu)),
@@ -62,6 +74,7 @@ pub fn dims_values(
         ("INPUT_DELAY_SAMPLES", quote!([#(#delay_samples),*])),
         ("MAX_QP_ITERATIONS", lit(mpc.max_qp_iterations)),
         ("TRUST_BOUND", quote!([#(#trust),*])),
+        ("ENVELOPE", quote!([#(#plausible),*])),
         ("REGULARISATION", float_literal(mpc.regularisation, options.float)?),
     ]))
 }
