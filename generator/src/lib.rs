@@ -11,6 +11,7 @@ pub mod codegen;
 pub mod diagnose;
 pub mod discretize;
 pub mod evaluate;
+pub mod fuzzing;
 pub mod identify;
 pub mod ir;
 pub mod logs;

@@ -2,6 +2,7 @@
 //! to overwrite foreign directories, bad input (non-zero exit, clear message,
 //! nothing written) and `import-pysindy`.
 
+mod shared;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -741,7 +742,7 @@ fn identify_input_delay_none_keeps_the_inputs_as_logged() {
 fn identify_m100_defaults(method: &str) -> Option<(std::process::Output, std::path::PathBuf, tempfile::TempDir)> {
     let m = repo().join("../shared/flights/m100");
     if !m.join("m100_run1.csv").exists() {
-        eprintln!("SKIPPED: {} is absent", m.display());
+        shared::skip(&m.join("m100_run1.csv"));
         return None;
     }
     let tmp = tempfile::tempdir().unwrap();

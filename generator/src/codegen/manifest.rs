@@ -33,11 +33,11 @@ pub fn readme(
          One real-time iteration per sample: `prepare` with the reference window before the measurement \
          arrives, `feedback` with the measured state, apply `u0`, `shift` when time advances by `DT`.\n\n\
          ```rust,ignore\n\
-         use {crate_name}::{{Mpc, Status, N, NX}};\n\n\
+         use {crate_name}::{{Mpc, Real, Status, N, NX}};\n\n\
          let mut mpc = Mpc::new();                          // `const fn`: may also be a `static`\n\
          mpc.initialize(&x0, &[0.0; {crate_name}::NU]);     // guess: hold x0 with zero input\n\
          loop {{\n\
-         \x20   let reference: [[f64; NX]; N + 1] = next_reference_window(); // states at t, t + DT, …, t + N·DT\n\
+         \x20   let reference: [[Real; NX]; N + 1] = next_reference_window(); // states at t, t + DT, …, t + N·DT\n\
          \x20   mpc.prepare(&reference);                       // linearise and factorise\n\
          \x20   let x = measure();                             // the state estimate now\n\
          \x20   let s = mpc.feedback(&x);                      // s.u0: finite, within U_MIN..U_MAX\n\
