@@ -55,7 +55,7 @@ fn absurd_model_parameters_are_named_errors_in_generate_and_check() {
             .unwrap()
             .push(serde_json::json!({"state": "vx", "term": "vx^2", "coefficient": 1e308}))
     });
-    let xi = model_with(tmp.path(), "pd_hover.json", "xi.json", |v| v["xi"][3] = 1e12.into());
+    let xi = model_with(tmp.path(), "pd_hover.json", "xi.json", |v| v["xi"]["xi4"] = 1e12.into());
     let correction = model_with(tmp.path(), "sindy_m100.json", "corr.json", |v| {
         v["corrections"] = serde_json::json!({"force_bias": [1e300, 0, 0]})
     });
@@ -63,7 +63,7 @@ fn absurd_model_parameters_are_named_errors_in_generate_and_check() {
         (&gravity, "gravity", "1e308"),
         (&mass, "mass", "1e308"),
         (&coefficient, "coefficients[", "1e308"),
-        (&xi, "xi[3]", "1e12"),
+        (&xi, "xi.xi4", "1e12"),
         (&correction, "corrections.force_bias[0]", "1e300"),
     ] {
         let out = tmp.path().join("out");
@@ -144,7 +144,7 @@ fn absurd_mpc_options_and_plants_are_refused() {
     let out = tmp.path().join("crate");
     for (text, field, value) in [
         (r#"{"q": [1e308, 2, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0]}"#, "q[0]", "1e308"),
-        (r#"{"r": [0.1, 0.1, 0.1, 2e6]}"#, "r[3]", "2e6"),
+        (r#"{"r": [0.1, 0.1, 0.1, 2e6]}"#, "r[3]", "2000000"),
         (r#"{"u_min": [-1e308, -1, -1, -1]}"#, "u_min[0]", "-1e308"),
         (r#"{"u_max": [1, 1, 1, 1e308]}"#, "u_max[3]", "1e308"),
         (r#"{"regularisation": 1e300}"#, "regularisation", "1e300"),
