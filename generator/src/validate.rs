@@ -28,6 +28,10 @@ pub const MAX_INPUTS: usize = 16;
 /// Most library terms of a SINDy model.
 pub const MAX_LIBRARY_TERMS: usize = 2000;
 
+/// Most non-zero coefficients of a SINDy model (the generated code and its Jacobians grow with
+/// them; the paper's model has 155 candidate terms per row).
+pub const MAX_COEFFICIENTS: usize = 5000;
+
 /// MPC weights (q, q_terminal, r).
 pub const MPC_WEIGHT: (f64, f64) = (0.0, 1e6);
 /// Largest |bound| of an MPC input bound.

@@ -607,7 +607,7 @@ fn identify_with_input_delay_writes_the_latency_and_refuses_bad_specs() {
     assert_eq!(model.input_delays(), vec![0.0, 0.1, 0.0, 0.2]);
     for (spec, named) in [
         ("u_foo=0.1", "unknown input 'u_foo'"),
-        ("-0.1", ">= 0"),
+        ("-0.1", "within [0, 10] s"),
         ("u_vz=abc", "'abc'"),
     ] {
         let bad = tmp.path().join("bad.json");

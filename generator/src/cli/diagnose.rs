@@ -11,7 +11,7 @@ pub struct DiagnoseArgs {
     /// Model file (uavgen-model/1, without a `corrections` block).
     #[arg(long, required_unless_present = "self_check")]
     model: Option<PathBuf>,
-    /// Training flight log (LOG_FORMAT.md CSV); repeat for several.
+    /// Training flight log (docs/log-format.md CSV); repeat for several.
     #[arg(long = "log", required_unless_present = "self_check")]
     logs: Vec<PathBuf>,
     /// Held-out flight log the candidates are scored on; repeat for several. Without one:

@@ -47,7 +47,7 @@ pub struct IdentifyArgs {
     /// Identification method.
     #[arg(long, value_enum)]
     method: Method,
-    /// Flight log (LOG_FORMAT.md CSV); repeat for several.
+    /// Flight log (docs/log-format.md CSV); repeat for several.
     #[arg(long = "log", required = true)]
     logs: Vec<PathBuf>,
     /// Output model file.

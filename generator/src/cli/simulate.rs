@@ -18,7 +18,7 @@ pub struct SimulateArgs {
     /// Seed of every random process (excitation, noise, stale samples, turbulence).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Output log (LOG_FORMAT.md CSV).
+    /// Output log (docs/log-format.md CSV).
     #[arg(long)]
     out: PathBuf,
     /// Overwrite --out if it exists.

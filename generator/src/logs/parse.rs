@@ -431,7 +431,7 @@ mod tests {
         assert_eq!(integer("f", 1, 0, "-2.0").unwrap(), -2);
         assert_eq!(integer("f", 1, 0, "1.5").unwrap_err().kind, K::NotNumeric);
         assert_eq!(integer("f", 1, 0, "nan").unwrap_err().kind, K::NonFinite);
-        assert_eq!(integer("f", 1, 0, "1e300").unwrap_err().kind, K::NotNumeric);
+        assert_eq!(integer("f", 1, 0, "1e300").unwrap_err().kind, K::OutOfRange);
     }
 
     #[test]

@@ -374,6 +374,25 @@ fn finish(mut model: Model, corrections: Option<Corrections>, label: &str) -> Re
         }
     }
     if let Dynamics::Sindy(s) = &model.dynamics {
+        let coefficients: usize = s
+            .rows
+            .iter()
+            .map(|r| match r {
+                Row::Sparse(entries) => entries.len(),
+                Row::Kinematic(_) => 0,
+            })
+            .sum();
+        if coefficients > validate::MAX_COEFFICIENTS {
+            return Err(ModelError::new(
+                label,
+                "coefficients",
+                K::WrongCount,
+                format!(
+                    "{coefficients} coefficients: at most {} are supported (the generated code grows with them; docs/model-format.md#ranges)",
+                    validate::MAX_COEFFICIENTS
+                ),
+            ));
+        }
         if s.library.len() > validate::MAX_LIBRARY_TERMS {
             return Err(ModelError::new(
                 label,
