@@ -16,11 +16,14 @@ fi
 # seeds small.
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
+logs=target/fuzz-logs
+mkdir -p "$logs"
+cargo +nightly fuzz build -O
 for t in "${targets[@]}"; do
     mkdir -p "$work/$t"
     cp corpus/"$t"/* "$work/$t/"
     echo "== $t: ${seconds} s"
-    cargo +nightly fuzz run "$t" "$work/$t" -- -max_total_time="$seconds" -max_len=65536 \
-        -artifact_prefix="artifacts/$t/" 2>&1 | grep -E "^#[0-9]+.*(DONE|pulse)|ERROR|panicked|SUMMARY" | tail -3
-    echo "   corpus: $(ls "$work/$t" | wc -l) inputs"
+    cargo +nightly fuzz run -O "$t" "$work/$t" -- -max_total_time="$seconds" -max_len=65536 \
+        -artifact_prefix="artifacts/$t/" 2>&1 | tee "$logs/$t.log" | grep -E "^#[0-9]+.*(DONE|pulse)|ERROR|panicked|SUMMARY" | tail -3
+    echo "   corpus: $(ls "$work/$t" | wc -l) inputs (full log: fuzz/$logs/$t.log)"
 done

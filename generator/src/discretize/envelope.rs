@@ -15,6 +15,8 @@ pub const TRUST_FACTOR: f64 = 2.0;
 /// The plausibility envelope ([`Envelope::plausibility_bounds`]) is this many times the envelope
 /// on velocities, body rates and lag states.
 pub const PLAUSIBILITY_FACTOR: f64 = 10.0;
+/// Largest plausible |roll|, |pitch|, rad (86°: the Euler angles are singular at π/2).
+pub const PLAUSIBLE_TILT: f64 = 1.5;
 /// Largest plausible |x|, |y|, |z|, m.
 pub const PLAUSIBLE_POSITION: f64 = 1e4;
 
@@ -107,7 +109,7 @@ impl Envelope {
 
     /// The plausibility envelope of the generated MPC's x₀ and reference (`ENVELOPE` of the
     /// generated crate; docs/mpc.md, "Plausibility"): |xᵢ| ≤ bound, `f64::INFINITY` where there is
-    /// none. Positions 10 km, roll and pitch π/2 (where the Euler angles are singular), and
+    /// none. Positions 10 km, roll and pitch 1.5 rad (the Euler angles are singular at π/2), and
     /// [`PLAUSIBILITY_FACTOR`] times the envelope on velocities, body rates and the lag states;
     /// yaw (unwrapped), `flight_time` and states of other names are unbounded.
     pub fn plausibility_bounds(&self, states: &[String]) -> Vec<f64> {
@@ -115,7 +117,7 @@ impl Envelope {
             .iter()
             .map(|name| match name.as_str() {
                 "x" | "y" | "z" => PLAUSIBLE_POSITION,
-                "roll" | "pitch" => PI / 2.0,
+                "roll" | "pitch" => PLAUSIBLE_TILT,
                 "vx" | "vy" | "vz" | "roll_rate" | "pitch_rate" | "yaw_rate" => PLAUSIBILITY_FACTOR * self.bound(name),
                 n if n.ends_with(DOT_LAGGED_SUFFIX) || n.ends_with(LAGGED_SUFFIX) => {
                     PLAUSIBILITY_FACTOR * self.range(n).1
