@@ -103,10 +103,11 @@ fn write(path: &Path, text: &str) -> Result<(), String> {
 /// Runs `uavgen track`; Ok carries the exit status of the verdicts (0, 3 or 4).
 pub fn run(args: TrackArgs) -> Result<ExitCode, String> {
     super::refuse_existing(&args.out, args.force)?;
-    if !(args.duration.is_finite() && args.duration > 0.0) {
+    let max = uavgen::sim::run::MAX_DURATION_S;
+    if !(args.duration.is_finite() && args.duration > 0.0 && args.duration <= max) {
         return Err(format!(
-            "--duration: must be a positive number of seconds, got {}",
-            args.duration
+            "--duration: must be a positive number of seconds, at most {max}, got {}",
+            uavgen::validate::short(args.duration)
         ));
     }
     let rules = VerdictRules {
