@@ -363,3 +363,38 @@ fn a_closed_stdout_ends_the_program_quietly() {
         o.status
     );
 }
+
+#[test]
+fn unbounded_durations_are_refused_before_any_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("track");
+    let o = uavgen(&[
+        "track",
+        "--model",
+        "models/sindy_m100.json",
+        "--plant",
+        "plants/m100_like.json",
+        "--trajectory",
+        "circle",
+        "--duration",
+        "1e9",
+        "--out",
+        s(&out),
+    ]);
+    fails_with(&o, &["--duration", "1e9"]);
+    assert!(!out.exists());
+    let log = tmp.path().join("log.csv");
+    let o = uavgen(&[
+        "simulate",
+        "--plant",
+        "plants/m100_like.json",
+        "--profile",
+        "hover",
+        "--duration",
+        "1e9",
+        "--out",
+        s(&log),
+    ]);
+    fails_with(&o, &["--duration", "1000000000"]);
+    assert!(!log.exists());
+}
