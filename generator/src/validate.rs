@@ -32,6 +32,11 @@ pub const MAX_LIBRARY_TERMS: usize = 2000;
 /// them; the paper's model has 155 candidate terms per row).
 pub const MAX_COEFFICIENTS: usize = 5000;
 
+/// Largest growth of an unstable mode per sample, Re λ · DT, that generation with the automatic
+/// substep rule accepts: e^7 ≈ 1100 times in one sample (Re λ ≈ 210 1/s at 30 Hz). The paper's
+/// falling PD model grows far slower; a coefficient of 1e6 on vx does not.
+pub const MAX_GROWTH_PER_SAMPLE: f64 = 7.0;
+
 /// MPC weights (q, q_terminal, r).
 pub const MPC_WEIGHT: (f64, f64) = (0.0, 1e6);
 /// Largest |bound| of an MPC input bound.

@@ -81,6 +81,28 @@ fn absurd_model_parameters_are_named_errors_in_generate_and_check() {
 }
 
 #[test]
+fn an_absurdly_unstable_model_is_refused_by_the_substep_rule() {
+    // Within the coefficient range, but vx' = 1e6 vx: e-folding in a microsecond.
+    let tmp = tempfile::tempdir().unwrap();
+    let path = model_with(tmp.path(), "sindy_m100.json", "unstable.json", |v| {
+        for c in v["coefficients"].as_array_mut().unwrap() {
+            if c["state"] == "vx" && c["term"] == "vx" {
+                c["coefficient"] = 1e6.into();
+            }
+        }
+    });
+    let out = tmp.path().join("out");
+    for args in [
+        vec!["--model", s(&path), "--out", s(&out)],
+        vec!["check", "--model", s(&path)],
+    ] {
+        let o = uavgen(&args);
+        fails_with(&o, &[s(&path), "grows by", "1.0000e6"]);
+        assert!(!out.exists());
+    }
+}
+
+#[test]
 fn the_emitter_returns_an_error_for_non_finite_constants() {
     use uavgen::symbolic::{float_literal, Float};
     assert!(float_literal(f64::NAN, Float::F64).is_err());
