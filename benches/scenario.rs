@@ -20,7 +20,7 @@ pub struct Record {
     pub feedback_ns: Vec<f64>,
     pub total_ns: Vec<f64>,
     pub qp_iterations: Vec<usize>,
-    pub statuses: [usize; 5],
+    pub statuses: [usize; 6],
 }
 
 /// Deterministic pseudo-random numbers in [−1, 1).
@@ -49,6 +49,7 @@ fn status_index(s: Status) -> usize {
         Status::HessianRegularised => 2,
         Status::InvalidInput => 3,
         Status::NumericalFailure => 4,
+        Status::OutOfEnvelope => 5,
     }
 }
 
@@ -145,7 +146,7 @@ pub fn to_json(record: &Record, name: &str) -> String {
     format!(
         "{{\"model\": \"{name}\", \"steps\": {}, \"prepare_ns\": {}, \"feedback_ns\": {}, \"total_ns\": {}, \
          \"max_qp_iterations\": {}, \"statuses\": {{\"solved\": {}, \"iteration_cap\": {}, \"hessian_regularised\": {}, \
-         \"invalid_input\": {}, \"numerical_failure\": {}}}, \"size_of_mpc\": {}}}",
+         \"invalid_input\": {}, \"numerical_failure\": {}, \"out_of_envelope\": {}}}, \"size_of_mpc\": {}}}",
         record.total_ns.len(),
         arr(quantiles(&record.prepare_ns)),
         arr(quantiles(&record.feedback_ns)),
@@ -156,6 +157,7 @@ pub fn to_json(record: &Record, name: &str) -> String {
         record.statuses[2],
         record.statuses[3],
         record.statuses[4],
+        record.statuses[5],
         core::mem::size_of::<Mpc>(),
     )
 }
@@ -196,8 +198,8 @@ pub const ADVERSARIAL_STEPS: usize = 8;
 /// measured steps follow, with the plant kicked again every 3 steps in the last kind.
 /// Returns the status counts (in [`Record::statuses`] order) and the largest QP iteration count of
 /// the measured steps.
-pub fn run_adversarial(trials: usize, seed: u64) -> ([usize; 5], usize) {
-    let (mut statuses, mut max_iterations) = ([0; 5], 0);
+pub fn run_adversarial(trials: usize, seed: u64) -> ([usize; 6], usize) {
+    let (mut statuses, mut max_iterations) = ([0; 6], 0);
     let mut rng = Lcg(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(17));
     for trial in 0..trials {
         let edge = |rng: &mut Lcg, bound: f64| {

@@ -58,6 +58,7 @@ fn status_code(s: Status) -> i32 {
         Status::HessianRegularised => status::HESSIAN_REGULARISED,
         Status::InvalidInput => status::INVALID_INPUT,
         Status::NumericalFailure => status::NUMERICAL_FAILURE,
+        Status::OutOfEnvelope => status::OUT_OF_ENVELOPE,
     }
 }
 

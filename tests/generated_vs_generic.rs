@@ -231,6 +231,39 @@ macro_rules! comparisons {
                     assert!(s.u0[i] >= $krate::U_MIN[i] && s.u0[i] <= $krate::U_MAX[i]);
                 }
             }
+
+            /// A broken estimator (positions of 1e6..1e30 m, a speed of 1e3 m/s) or a reference
+            /// far away is flagged, never `Solved`; the input stays finite and within bounds.
+            #[test]
+            fn absurd_states_are_out_of_envelope_not_solved() {
+                let r = window("circular", 0.0);
+                let mut cases = Vec::new();
+                for p in [1e6, 1e12, 1e30] {
+                    let mut x0 = [0.0; NX];
+                    x0[0] = p;
+                    cases.push((x0, r));
+                }
+                let mut fast = [0.0; NX];
+                fast[6] = 1e3;
+                cases.push((fast, r));
+                let mut far_r = r;
+                far_r[N][2] = 1e7;
+                cases.push(([0.0; NX], far_r));
+                for (x0, r) in cases {
+                    let mut mpc = Mpc::new();
+                    let s = mpc.solve(&x0, &r);
+                    assert_eq!(s.status, Status::OutOfEnvelope, "x0 {:?}", &x0[..7]);
+                    for i in 0..NU {
+                        assert!(s.u0[i].is_finite() && s.u0[i] >= $krate::U_MIN[i] && s.u0[i] <= $krate::U_MAX[i]);
+                    }
+                }
+                // Inside the envelope the same solver says Solved (or a usable status).
+                let mut mpc = Mpc::new();
+                let mut x0 = [0.0; NX];
+                x0[..3].copy_from_slice(&[3.0, 3.0, 5.0]);
+                let s = mpc.solve(&x0, &r);
+                assert_ne!(s.status, Status::OutOfEnvelope);
+            }
         }
     };
 }

@@ -11,6 +11,7 @@ pub mod codegen;
 pub mod diagnose;
 pub mod discretize;
 pub mod evaluate;
+pub mod fuzzing;
 pub mod identify;
 pub mod import;
 pub mod ir;
@@ -23,6 +24,7 @@ pub mod selfcheck;
 pub mod sim;
 pub mod symbolic;
 pub mod track;
+pub mod validate;
 
 pub use codegen::{generate, Float, GenerateOptions, GeneratedCrate};
 pub use ir::ModelIr;

@@ -5,7 +5,7 @@ mod cli;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use uavgen::codegen::write::write_all;
+use uavgen::codegen::write::write_all_with;
 use uavgen::codegen::{default_crate_name, Float, GenerateOptions, QpChoice};
 use uavgen::model::pysindy::{import, ImportOptions, KinematicRows};
 
@@ -27,7 +27,7 @@ struct Cli {
 enum Command {
     /// Convert a PySINDy export (scripts/export_pysindy.py) to a uavgen-model/1 file.
     ImportPysindy(ImportArgs),
-    /// Validate a model file and print its summary (sizes, sparsity, substeps).
+    /// Validate a model file and print its summary (sizes, sparsity, substeps): runs exactly what generation runs, in memory, and writes nothing.
     Check(CheckArgs),
     /// Worst-case benchmark of a generated crate (see docs/benchmarks.md).
     Bench(BenchArgs),
@@ -76,6 +76,9 @@ struct BenchArgs {
     /// Also write the results as JSON.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Overwrite --json if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Args)]
@@ -107,6 +110,9 @@ struct GenerateArgs {
     /// flops, Riccati also when the condensed Hessian would not fit 64 KB; docs/mpc.md).
     #[arg(long, value_enum, default_value_t = QpArg::Auto)]
     qp: QpArg,
+    /// Regenerate even if --out, a crate uavgen generated, holds files uavgen did not write (they are deleted).
+    #[arg(long)]
+    force: bool,
     /// MPC options file: weights, input bounds, QP limits (default: the paper's but q yaw 1, r u_yaw_rate 10; examples/mpc_paper.json has the paper's; see docs/mpc.md).
     #[arg(long)]
     mpc: Option<PathBuf>,
@@ -163,9 +169,40 @@ struct CheckArgs {
     /// Sample rate in Hz for the substep rule.
     #[arg(long, default_value_t = 30.0)]
     rate: f64,
+    /// MPC horizon N in samples (as for generation).
+    #[arg(long, default_value_t = 30)]
+    horizon: usize,
+    /// RK4 substeps per sample (default: chosen automatically, see docs/discretisation.md).
+    #[arg(long)]
+    substeps: Option<usize>,
+    /// Floating-point type of the generated code.
+    #[arg(long, value_enum, default_value_t = FloatArg::F64)]
+    float: FloatArg,
+    /// MPC options file (see docs/mpc.md).
+    #[arg(long)]
+    mpc: Option<PathBuf>,
 }
 
+/// Let a closed pipe end the program quietly, as it ends `cat` (`uavgen simulate ... | head`):
+/// Rust ignores SIGPIPE, so every `println!` after the reader left would panic instead.
+#[cfg(unix)]
+fn default_sigpipe() {
+    extern "C" {
+        fn signal(signum: i32, handler: usize) -> usize;
+    }
+    const SIGPIPE: i32 = 13;
+    const SIG_DFL: usize = 0;
+    // SAFETY: restoring the default disposition of one signal before any thread is started.
+    unsafe {
+        signal(SIGPIPE, SIG_DFL);
+    }
+}
+
+#[cfg(not(unix))]
+fn default_sigpipe() {}
+
 fn main() -> ExitCode {
+    default_sigpipe();
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::ImportPysindy(args)) => import_pysindy(args),
@@ -226,7 +263,7 @@ fn generate(args: GenerateArgs) -> Result<(), String> {
     // Refuse early, before the (possibly slow) substep scan.
     uavgen::codegen::write::check_target(&out).map_err(|e| e.to_string())?;
     let generated = uavgen::generate(&model, &options).map_err(|e| format!("{}: {e}", path.display()))?;
-    write_all(&out, &generated.files).map_err(|e| e.to_string())?;
+    write_all_with(&out, &generated.files, args.force).map_err(|e| e.to_string())?;
     let how = match &generated.substep_choice {
         Some(c) => format!(
             "auto: stiffest eigenvalue {:.1}{:+.1}i 1/s over {} envelope points",
@@ -265,19 +302,12 @@ fn import_pysindy(args: ImportArgs) -> Result<(), String> {
         },
         drop_below: 0.0,
     };
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to overwrite it", args.out.display()));
-    }
+    cli::refuse_existing(&args.out, args.force)?;
     let file = import(&text, &label, &options).map_err(|e| e.to_string())?;
     let json = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())? + "\n";
     // Validate the result exactly as `--model` would read it before writing anything.
     uavgen::model::parse(&json, &label).map_err(|e| format!("the imported model is invalid: {e}"))?;
-    let tmp = args.out.with_extension("json.uavgen-tmp");
-    std::fs::write(&tmp, &json).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, &args.out).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("{}: {e}", args.out.display())
-    })?;
+    cli::write_atomically(&args.out, &json)?;
     println!(
         "wrote {} ({} coefficients, {} library terms)",
         args.out.display(),
@@ -288,12 +318,25 @@ fn import_pysindy(args: ImportArgs) -> Result<(), String> {
 }
 
 fn check(args: CheckArgs) -> Result<(), String> {
-    let rate = GenerateOptions {
+    let options = GenerateOptions {
         rate_hz: args.rate,
+        horizon: args.horizon,
+        substeps: args.substeps,
+        float: match args.float {
+            FloatArg::F64 => Float::F64,
+            FloatArg::F32 => Float::F32,
+        },
         ..GenerateOptions::default()
     };
-    rate.validate().map_err(|e| e.to_string())?;
+    options.validate().map_err(|e| e.to_string())?;
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
+    let options = GenerateOptions {
+        mpc: match &args.mpc {
+            Some(p) => Some(uavgen::MpcOptions::load(&model, p)?),
+            None => None,
+        },
+        ..options
+    };
     let ir = uavgen::ModelIr::new(&model);
     println!(
         "{}: model '{}' ({}), {} states, {} inputs",
@@ -312,11 +355,20 @@ fn check(args: CheckArgs) -> Result<(), String> {
         ir.jacobian_nonzeros(),
         model.nx() * (model.nx() + model.nu())
     );
-    let choice = uavgen::discretize::auto_substeps(&ir, 1.0 / args.rate, &uavgen::discretize::Envelope::default())
-        .map_err(|e| e.to_string())?;
+    // Exactly what `uavgen --model` runs, in memory: whatever generation would refuse, check refuses.
+    let generated = uavgen::generate(&model, &options).map_err(|e| format!("{}: {e}", args.model.display()))?;
+    match &generated.substep_choice {
+        Some(c) => println!(
+            "  RK4 at {} Hz: {} substeps (stiffest eigenvalue {:.2}{:+.2}i 1/s over {} envelope points)",
+            args.rate, generated.substeps, c.stiffest.re, c.stiffest.im, c.points
+        ),
+        None => println!("  RK4 at {} Hz: {} substeps (given)", args.rate, generated.substeps),
+    }
     println!(
-        "  RK4 at {} Hz: {} substeps (stiffest eigenvalue {:.2}{:+.2}i 1/s over {} envelope points)",
-        args.rate, choice.substeps, choice.stiffest.re, choice.stiffest.im, choice.points
+        "  generation: ok (crate `{}`, {} files, N = {})",
+        generated.crate_name,
+        generated.files.len(),
+        options.horizon
     );
     Ok(())
 }
@@ -325,6 +377,9 @@ fn bench(args: BenchArgs) -> Result<(), String> {
     use uavgen::bench::*;
     if args.steps == 0 {
         return Err("--steps must be at least 1".into());
+    }
+    if let Some(path) = &args.json {
+        cli::refuse_existing(path, args.force)?;
     }
     let work_dir = std::path::absolute(&args.work_dir).map_err(|e| format!("{}: {e}", args.work_dir.display()))?;
     let options = BenchOptions {
@@ -415,7 +470,7 @@ fn bench(args: BenchArgs) -> Result<(), String> {
     if let Some(path) = &args.json {
         let value = serde_json::json!({ "generated": timing, "instructions": instructions, "adversarial": adversarial, "generic": generic, "native": options.native });
         let text = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())? + "\n";
-        std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        cli::write_atomically(path, &text)?;
     }
     Ok(())
 }

@@ -126,6 +126,16 @@ impl MpcOptions {
             if let Some(i) = v.iter().position(|x| !x.is_finite()) {
                 return Err(format!("{label}: {field}[{i}]: non-finite value"));
             }
+            // Weights and bounds have documented ranges (docs/mpc.md#ranges): beyond them the
+            // condensed QP overflows or the solver returns inputs no vehicle accepts.
+            for (i, &x) in v.iter().enumerate() {
+                let checked = if field.starts_with('u') {
+                    crate::validate::bounded(x, crate::validate::MPC_BOUND_MAX_ABS)
+                } else {
+                    crate::validate::within(x, crate::validate::MPC_WEIGHT, "")
+                };
+                checked.map_err(|m| format!("{label}: {field}[{i}]: {m}"))?;
+            }
             Ok(v)
         };
         let q = vector("q", file.q, d.q, nx)?;
@@ -145,19 +155,22 @@ impl MpcOptions {
             ));
         }
         let max_qp_iterations = file.max_qp_iterations.unwrap_or(d.max_qp_iterations);
-        if max_qp_iterations == 0 {
-            return Err(format!("{label}: max_qp_iterations must be at least 1"));
-        }
-        let max_ipm_iterations = file.max_ipm_iterations.unwrap_or(d.max_ipm_iterations);
-        if max_ipm_iterations == 0 {
-            return Err(format!("{label}: max_ipm_iterations must be at least 1"));
-        }
-        let regularisation = file.regularisation.unwrap_or(d.regularisation);
-        if !(regularisation.is_finite() && regularisation >= 0.0) {
+        if !(1..=crate::validate::MPC_MAX_QP_ITERATIONS).contains(&max_qp_iterations) {
             return Err(format!(
-                "{label}: regularisation must be finite and ≥ 0, found {regularisation}"
+                "{label}: max_qp_iterations must be between 1 and {}, found {max_qp_iterations}",
+                crate::validate::MPC_MAX_QP_ITERATIONS
             ));
         }
+        let max_ipm_iterations = file.max_ipm_iterations.unwrap_or(d.max_ipm_iterations);
+        if !(1..=crate::validate::MPC_MAX_QP_ITERATIONS).contains(&max_ipm_iterations) {
+            return Err(format!(
+                "{label}: max_ipm_iterations must be between 1 and {}, found {max_ipm_iterations}",
+                crate::validate::MPC_MAX_QP_ITERATIONS
+            ));
+        }
+        let regularisation = file.regularisation.unwrap_or(d.regularisation);
+        crate::validate::within(regularisation, crate::validate::MPC_REGULARISATION, "")
+            .map_err(|m| format!("{label}: regularisation: {m}"))?;
         Ok(Self {
             q,
             q_terminal,
@@ -174,7 +187,23 @@ impl MpcOptions {
     pub fn load(model: &Model, path: &Path) -> Result<Self, String> {
         let label = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|e| format!("{label}: cannot read: {e}"))?;
-        let file: MpcOptionsFile = serde_json::from_str(&text).map_err(|e| format!("{label}: {e}"))?;
-        Self::from_file(model, file, &label)
+        Self::parse(model, &text, &label)
+    }
+
+    /// Validate options text for `model`; `label` names the file in errors.
+    pub fn parse(model: &Model, text: &str, label: &str) -> Result<Self, String> {
+        let text = crate::validate::strip_bom(text);
+        let mut de = serde_json::Deserializer::from_str(text);
+        let file: MpcOptionsFile = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            let path = e.path().to_string();
+            let inner = e.into_inner().to_string();
+            if path == "." {
+                format!("{label}: {inner}")
+            } else {
+                format!("{label}: {path}: {inner}")
+            }
+        })?;
+        de.end().map_err(|e| format!("{label}: {e}"))?;
+        Self::from_file(model, file, label)
     }
 }

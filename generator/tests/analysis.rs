@@ -2,6 +2,7 @@
 //! cross-correlation, regimes and findings on small synthetic signals with known answers, and
 //! the shipped SINDy model on M100 run 7 (skipped when ../shared is absent).
 
+mod shared;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::PathBuf;
@@ -357,7 +358,7 @@ fn shared_run7() -> Option<PathBuf> {
     if path.is_file() {
         Some(path)
     } else {
-        eprintln!("SKIPPED: {} is absent", path.display());
+        shared::skip(&path);
         None
     }
 }

@@ -5,6 +5,7 @@
 //!
 //! Run with `cargo test -p uavgen --release --test diagnose_external -- --nocapture`.
 
+mod shared;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -18,7 +19,7 @@ fn flights() -> Option<PathBuf> {
     if dir.join("rotorpy_nominal_train.csv").exists() {
         Some(dir)
     } else {
-        eprintln!("SKIPPED: {} is absent", dir.display());
+        shared::skip(&dir.join("rotorpy_nominal_train.csv"));
         None
     }
 }
@@ -187,7 +188,7 @@ fn m100_runs() {
     let Some(flights) = flights() else { return };
     let m100 = flights.join("m100");
     if !m100.join("m100_run7.csv").exists() {
-        eprintln!("SKIPPED: {} is absent", m100.display());
+        shared::skip(&m100);
         return;
     }
     let tmp = tempfile::tempdir().unwrap();

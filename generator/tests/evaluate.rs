@@ -1,6 +1,7 @@
 //! uavgen::evaluate: the three prediction kinds on synthetic logs with known answers,
 //! divergence handling, plots, and the shared M100 run 7 (skipped when absent).
 
+mod shared;
 use std::path::PathBuf;
 use uavgen::discretize::discrete_step;
 use uavgen::evaluate::{evaluate, plot_states, wrap_angle, EvaluateOptions, Evaluation};
@@ -326,7 +327,7 @@ fn m100() -> Option<PathBuf> {
     if dir.join("m100_run7.csv").is_file() {
         Some(dir)
     } else {
-        eprintln!("SKIPPED: {} is absent", dir.display());
+        shared::skip(&dir.join("m100_run7.csv"));
         None
     }
 }

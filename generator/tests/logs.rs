@@ -2,6 +2,7 @@
 //! unwrapping and the quality report by hand on tiny logs; no panic on random input; the figures of
 //! the shared M100 and RotorPy logs (skipped when `../shared/flights` is absent).
 
+mod shared;
 use proptest::prelude::*;
 use std::f64::consts::PI;
 use std::path::PathBuf;
@@ -663,10 +664,7 @@ fn flights() -> Option<PathBuf> {
     if dir.join("m100").is_dir() {
         Some(dir.canonicalize().unwrap_or(dir))
     } else {
-        eprintln!(
-            "SKIPPED: {} is absent (the shared flight logs live beside the repository)",
-            dir.display()
-        );
+        shared::skip(&dir.join("m100"));
         None
     }
 }
@@ -752,7 +750,7 @@ fn rotorpy_logs() {
     ] {
         let path = dir.join(name);
         if !path.is_file() {
-            eprintln!("SKIPPED: {} is absent", path.display());
+            shared::skip(&path);
             continue;
         }
         let l = read_log(&path).unwrap_or_else(|e| panic!("{e}"));

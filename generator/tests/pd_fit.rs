@@ -1,6 +1,7 @@
 //! The PD fit (`uavgen::identify::pd`): recovery of known ξ from synthetic data, scale fixing,
 //! bounds and errors, and the fit on the M100 logs when `../shared` is present.
 
+mod shared;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::PathBuf;
@@ -366,10 +367,7 @@ fn lowpass_option_runs_and_stays_close() {
 fn m100_runs_1_to_5() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/flights/m100");
     if !dir.is_dir() {
-        eprintln!(
-            "skipping: {} is absent (flight logs live beside the repository)",
-            dir.display()
-        );
+        shared::skip(&dir);
         return;
     }
     let logs: Vec<_> = (1..=5)

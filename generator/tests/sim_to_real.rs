@@ -13,6 +13,7 @@
 //! Needs `../shared/flights/m100` (CI has it); without it the test says SKIPPED and returns.
 
 mod common;
+mod shared;
 
 use common::{repo, uavgen};
 use serde_json::Value;
@@ -28,7 +29,7 @@ fn m100() -> Option<PathBuf> {
     if dir.join("m100_run7.csv").exists() {
         Some(dir)
     } else {
-        eprintln!("SKIPPED: {} is absent", dir.display());
+        shared::skip(&dir.join("m100_run7.csv"));
         None
     }
 }

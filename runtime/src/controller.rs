@@ -83,6 +83,10 @@ pub enum ControlErrorKind {
     SolverInvalidInput,
     /// The solver reported `NumericalFailure` and kept its previous plan.
     NumericalFailure,
+    /// The solver reported `OutOfEnvelope`: the measured state or the reference is far outside
+    /// the model's envelope (a broken estimator?). The input is the solver's, finite and within
+    /// the bounds, but not to be trusted.
+    OutOfEnvelope,
     /// [`Controller::step`] only: feedback succeeded but the next preparation could not get a
     /// reference window and reused the previous one, shifted.
     Reference(ReferenceError),
@@ -97,6 +101,7 @@ impl core::fmt::Display for ControlErrorKind {
             ControlErrorKind::InputClamped => f.write_str("solver input outside the bounds, clamped"),
             ControlErrorKind::SolverInvalidInput => f.write_str("solver reported invalid input"),
             ControlErrorKind::NumericalFailure => f.write_str("solver reported a numerical failure"),
+            ControlErrorKind::OutOfEnvelope => f.write_str("state or reference outside the model's envelope"),
             ControlErrorKind::Reference(e) => write!(f, "next reference window: {e}"),
         }
     }
@@ -337,6 +342,7 @@ where
             match solution.status {
                 Status::InvalidInput => Some(ControlErrorKind::SolverInvalidInput),
                 Status::NumericalFailure => Some(ControlErrorKind::NumericalFailure),
+                Status::OutOfEnvelope => Some(ControlErrorKind::OutOfEnvelope),
                 Status::Solved | Status::IterationCap | Status::HessianRegularised => None,
             }
         };

@@ -16,6 +16,9 @@ pub enum Status {
     InvalidInput,
     /// A non-finite value appeared; the previous plan is kept.
     NumericalFailure,
+    /// x₀ or the reference lies outside the generated crate's `ENVELOPE`: the input is finite and
+    /// within bounds but extrapolates the model far beyond its data.
+    OutOfEnvelope,
 }
 
 impl Status {
@@ -34,6 +37,7 @@ impl core::fmt::Display for Status {
             Status::HessianRegularised => "Hessian regularised",
             Status::InvalidInput => "invalid input (previous plan kept)",
             Status::NumericalFailure => "numerical failure (previous plan kept)",
+            Status::OutOfEnvelope => "state or reference outside the model's envelope",
         })
     }
 }
@@ -168,6 +172,7 @@ macro_rules! mpc_adapter {
                     $krate::Status::HessianRegularised => $crate::Status::HessianRegularised,
                     $krate::Status::InvalidInput => $crate::Status::InvalidInput,
                     $krate::Status::NumericalFailure => $crate::Status::NumericalFailure,
+                    $krate::Status::OutOfEnvelope => $crate::Status::OutOfEnvelope,
                 }
             }
         }

@@ -787,6 +787,8 @@ mod fake_generated {
         HessianRegularised,
         InvalidInput,
         NumericalFailure,
+        #[allow(dead_code)]
+        OutOfEnvelope,
     }
 
     pub struct Solution {

@@ -21,7 +21,7 @@ use core::ptr;
 
 use uavgen_model::{discrete_dynamics, Mpc, Real, Solution, Status, N, NU, NX};
 
-/// The status codes of the header (`<NAME>_<CODE>`). 0..=4 are the solver's statuses (an input was
+/// The status codes of the header (`<NAME>_<CODE>`). 0..=5 are the solver's statuses (an input was
 /// produced and is safe to apply); negative codes reject the call, which changes nothing.
 pub mod status {
 @STATUS_CODES@}
@@ -73,6 +73,7 @@ fn status_code(status: Status) -> i32 {
         Status::HessianRegularised => status::HESSIAN_REGULARISED,
         Status::InvalidInput => status::INVALID_INPUT,
         Status::NumericalFailure => status::NUMERICAL_FAILURE,
+        Status::OutOfEnvelope => status::OUT_OF_ENVELOPE,
     }
 }
 

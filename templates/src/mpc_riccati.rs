@@ -5,7 +5,7 @@
 
 use crate::riccati::{IpmStatus, RiccatiIpm, StageQp};
 use crate::rk4::{discrete_dynamics, discrete_linearization};
-use crate::{Real, MAX_IPM_ITERATIONS, N, NU, NX, Q, Q_TERMINAL, R, TRUST_BOUND, U_MAX, U_MIN};
+use crate::{Real, ENVELOPE, MAX_IPM_ITERATIONS, N, NU, NX, Q, Q_TERMINAL, R, TRUST_BOUND, U_MAX, U_MIN};
 
 /// What happened in a solve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -20,6 +20,9 @@ pub enum Status {
     InvalidInput,
     /// A non-finite value appeared in the linearisation or the step: the previous plan is kept.
     NumericalFailure,
+    /// x₀ or the reference lies outside `ENVELOPE` (a broken estimator, a wrong unit): the step
+    /// was taken (u0 finite and within the bounds) but its plan means nothing (as in `mpc.rs`).
+    OutOfEnvelope,
 }
 
 /// Result of [`Mpc::feedback`].
@@ -80,6 +83,11 @@ impl Default for Mpc {
 #[inline]
 fn all_finite(values: &[Real]) -> bool {
     values.iter().all(|v| v.is_finite())
+}
+
+/// |xᵢ| ≤ `ENVELOPE[i]` for every state (false for a NaN).
+fn within_envelope(x: &[Real; NX]) -> bool {
+    x.iter().zip(&ENVELOPE).all(|(v, b)| v.abs() <= *b)
 }
 
 /// |xᵢ| ≤ `TRUST_BOUND[i]` for every state (false for a NaN).
@@ -244,8 +252,21 @@ impl Mpc {
         }
     }
 
-    /// Finish the step with the measurement x₀: the interior-point QP, guess update.
+    /// Finish the step with the measurement x₀: the interior-point QP, guess update. A step that
+    /// would report success from an x₀ or reference outside `ENVELOPE` reports `OutOfEnvelope`.
     pub fn feedback(&mut self, x0: &[Real; NX]) -> Solution {
+        let mut solution = self.feedback_step(x0);
+        let usable = matches!(
+            solution.status,
+            Status::Solved | Status::IterationCap | Status::HessianRegularised
+        );
+        if usable && !(within_envelope(x0) && self.reference.iter().all(within_envelope)) {
+            solution.status = Status::OutOfEnvelope;
+        }
+        solution
+    }
+
+    fn feedback_step(&mut self, x0: &[Real; NX]) -> Solution {
         if !all_finite(x0) {
             return self.keep_plan(Status::InvalidInput);
         }

@@ -39,8 +39,8 @@ fn main() {
     if let Some(n) = arg(&args, "--callgrind-adversarial") {
         let (s, it) = scenario::run_adversarial(n.parse().unwrap_or(100), seed);
         println!(
-            "{{\"statuses\": {{\"solved\": {}, \"iteration_cap\": {}, \"hessian_regularised\": {}, \"invalid_input\": {}, \"numerical_failure\": {}}}, \"max_qp_iterations\": {it}}}",
-            s[0], s[1], s[2], s[3], s[4]
+            "{{\"statuses\": {{\"solved\": {}, \"iteration_cap\": {}, \"hessian_regularised\": {}, \"invalid_input\": {}, \"numerical_failure\": {}, \"out_of_envelope\": {}}}, \"max_qp_iterations\": {it}}}",
+            s[0], s[1], s[2], s[3], s[4], s[5]
         );
         return;
     }

@@ -32,6 +32,7 @@ public:
         HessianRegularised = SINDY_M100_HESSIAN_REGULARISED,
         InvalidInput = SINDY_M100_INVALID_INPUT,
         NumericalFailure = SINDY_M100_NUMERICAL_FAILURE,
+        OutOfEnvelope = SINDY_M100_OUT_OF_ENVELOPE,
         NullPointer = SINDY_M100_NULL_POINTER,
         Misaligned = SINDY_M100_MISALIGNED,
         StorageTooSmall = SINDY_M100_STORAGE_TOO_SMALL,

@@ -68,5 +68,22 @@ pub const TRUST_BOUND: [Real; NX] = [
     6.0,
     6.0,
 ];
+/// Plausibility envelope of x₀ and the reference, |xᵢ| ≤ ENVELOPE[i] (`Real::INFINITY`: none):
+/// far outside the states the model was identified and checked on (docs/mpc.md, "Plausibility").
+/// A solve from beyond it reports `Status::OutOfEnvelope` instead of `Solved`.
+pub const ENVELOPE: [Real; NX] = [
+    10000.0,
+    10000.0,
+    10000.0,
+    1.5,
+    1.5,
+    Real::INFINITY,
+    50.0,
+    50.0,
+    50.0,
+    30.0,
+    30.0,
+    30.0,
+];
 /// Added to the diagonal of the condensed Hessian.
 pub const REGULARISATION: Real = 0.000000001;

@@ -15,7 +15,7 @@
  * aligned to SINDY_M100_STORAGE_ALIGN, zero-filled or initialised by sindy_m100_init) and must not use one
  * storage from two threads at once. Every function checks its pointers: NULL, a misaligned or
  * uninitialised storage and overlapping arrays are refused with a negative status and change
- * nothing. Status 0..4 (the solver's) means an input was produced and is safe to apply: finite and
+ * nothing. Status 0..5 (the solver's) means an input was produced and is safe to apply: finite and
  * within [U_MIN, U_MAX] whatever the status. No function allocates, blocks or panics.
  */
 #ifndef SINDY_M100_H
@@ -63,7 +63,7 @@ typedef struct sindy_m100_storage {
     SINDY_M100_ALIGNAS(SINDY_M100_STORAGE_ALIGN) unsigned char bytes[SINDY_M100_STORAGE_SIZE];
 } sindy_m100_storage;
 
-/* Status codes: 0..4 are the solver's statuses (an input was produced); negative codes reject the
+/* Status codes: 0..5 are the solver's statuses (an input was produced); negative codes reject the
  * call and change nothing. */
 typedef int32_t sindy_m100_status;
 enum sindy_m100_status_code {
@@ -73,6 +73,7 @@ enum sindy_m100_status_code {
     SINDY_M100_HESSIAN_REGULARISED = 2, /* the condensed Hessian needed a multiple of I to be positive definite */
     SINDY_M100_INVALID_INPUT = 3, /* a non-finite state or reference: the previous plan is kept, u0 is its first input */
     SINDY_M100_NUMERICAL_FAILURE = 4, /* a non-finite value in the linearisation or the step: the previous plan is kept */
+    SINDY_M100_OUT_OF_ENVELOPE = 5, /* x0 or the reference lies outside ENVELOPE: the input is finite and within the bounds, the plan means nothing */
     SINDY_M100_NULL_POINTER = -1, /* a pointer argument is NULL */
     SINDY_M100_MISALIGNED = -2, /* the storage is not aligned to STORAGE_ALIGN (arrays may have any alignment) */
     SINDY_M100_STORAGE_TOO_SMALL = -3, /* storage_size is smaller than the solver needs (see storage_size()) */

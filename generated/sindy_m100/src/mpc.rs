@@ -9,7 +9,7 @@ use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization};
 use crate::{
-    Real, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION,
+    Real, ENVELOPE, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION,
     TRUST_BOUND, U_MAX, U_MIN,
 };
 /// What happened in a solve.
@@ -25,6 +25,10 @@ pub enum Status {
     InvalidInput,
     /// A non-finite value appeared in the linearisation or the step: the previous plan is kept.
     NumericalFailure,
+    /// x₀ or the reference lies outside `ENVELOPE` (a broken estimator, a wrong unit): the step
+    /// was taken as usual and u0 is finite and within bounds, but the model is extrapolated far
+    /// beyond its data, so the input is not to be trusted.
+    OutOfEnvelope,
 }
 /// Result of [`Mpc::feedback`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,6 +87,10 @@ impl Default for Mpc {
 #[inline]
 fn all_finite(values: &[Real]) -> bool {
     values.iter().all(|v| v.is_finite())
+}
+/// |xᵢ| ≤ `ENVELOPE[i]` for every state (false for a NaN).
+fn within_envelope(x: &[Real; NX]) -> bool {
+    x.iter().zip(&ENVELOPE).all(|(v, b)| v.abs() <= *b)
 }
 /// |xᵢ| ≤ `TRUST_BOUND[i]` for every state (false for a NaN).
 #[inline]
@@ -333,8 +341,21 @@ impl Mpc {
         }
         if cost.is_finite() { cost } else { Real::MAX }
     }
-    /// Finish the step with the measurement x₀: gradient, QP, guess update.
+    /// Finish the step with the measurement x₀: gradient, QP, guess update. A step that would
+    /// report success from an x₀ or reference outside `ENVELOPE` reports `OutOfEnvelope`.
     pub fn feedback(&mut self, x0: &[Real; NX]) -> Solution {
+        let mut solution = self.feedback_step(x0);
+        let usable = matches!(
+            solution.status, Status::Solved | Status::IterationCap |
+            Status::HessianRegularised
+        );
+        if usable && !(within_envelope(x0) && self.reference.iter().all(within_envelope))
+        {
+            solution.status = Status::OutOfEnvelope;
+        }
+        solution
+    }
+    fn feedback_step(&mut self, x0: &[Real; NX]) -> Solution {
         if !all_finite(x0) {
             return self.keep_plan(Status::InvalidInput);
         }

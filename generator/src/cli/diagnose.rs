@@ -11,7 +11,7 @@ pub struct DiagnoseArgs {
     /// Model file (uavgen-model/1, without a `corrections` block).
     #[arg(long, required_unless_present = "self_check")]
     model: Option<PathBuf>,
-    /// Training flight log (LOG_FORMAT.md CSV); repeat for several.
+    /// Training flight log (docs/log-format.md CSV); repeat for several.
     #[arg(long = "log", required_unless_present = "self_check")]
     logs: Vec<PathBuf>,
     /// Held-out flight log the candidates are scored on; repeat for several. Without one:
@@ -109,9 +109,7 @@ fn self_check(args: &DiagnoseArgs) -> Result<(), String> {
         },
         ..SelfCheckOptions::default()
     };
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
-    }
+    super::refuse_existing(&args.out, args.force)?;
     let bar = super::identify::progress_bar(options.cases.len(), "cases");
     let check = selfcheck::run(&args.plants, &options, &mut |done, _, case| {
         bar.set_position(done as u64);
@@ -216,9 +214,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     let (Some(model_path), false) = (args.model.clone(), args.logs.is_empty()) else {
         return Err("--model and --log are required (or --self-check)".into());
     };
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
-    }
+    super::refuse_existing(&args.out, args.force)?;
     let savgol = SavGol::new(args.savgol_window, args.savgol_order)
         .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
     let candidates = match &args.effects {

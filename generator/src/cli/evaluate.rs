@@ -38,8 +38,12 @@ pub struct EvaluateArgs {
 }
 
 pub fn run(args: EvaluateArgs) -> Result<(), String> {
-    if let Some(path) = args.json.as_ref().filter(|p| p.exists() && !args.force) {
-        return Err(format!("{}: exists; pass --force to overwrite it", path.display()));
+    if let Some(path) = &args.json {
+        super::refuse_existing(path, args.force)?;
+    }
+    // Every output is checked before any work, so that a failure leaves nothing behind.
+    if let Some(dir) = args.plots.as_ref().filter(|d| d.exists() && !d.is_dir()) {
+        return Err(format!("--plots {}: exists and is not a directory", dir.display()));
     }
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
     let mut logs = Vec::new();
@@ -54,17 +58,18 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
     };
     let evaluation = evaluate(&model, &logs, &options).map_err(|e| e.to_string())?;
     println!("{evaluation}");
-    if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&evaluation).map_err(|e| e.to_string())? + "\n";
-        super::write_atomically(path, &text)?;
-    }
+    // The plots first, the JSON last: a failed plot leaves no JSON behind.
     if let Some(dir) = &args.plots {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(|e| format!("--plots {}: {e}", dir.display()))?;
         for log in &logs {
             for file in plot_states(&model, log, &options, dir).map_err(|e| e.to_string())? {
                 eprintln!("wrote {}", file.display());
             }
         }
+    }
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&evaluation).map_err(|e| e.to_string())? + "\n";
+        super::write_atomically(path, &text)?;
     }
     Ok(())
 }

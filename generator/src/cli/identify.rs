@@ -47,7 +47,7 @@ pub struct IdentifyArgs {
     /// Identification method.
     #[arg(long, value_enum)]
     method: Method,
-    /// Flight log (LOG_FORMAT.md CSV, or a recording imported with --profile); repeat for several.
+    /// Flight log (docs/log-format.md CSV, or a recording imported with --profile); repeat for several.
     #[arg(long = "log", required = true)]
     logs: Vec<PathBuf>,
     /// How to read --log files that are not CSV (PX4 ULog, …): a preset (px4, mavros,
@@ -160,14 +160,20 @@ fn parse_delay_spec(spec: &str) -> Result<DelaySpec, String> {
     }
 }
 
+/// The longest input delay `--input-delay` accepts, s (as a plant's latency).
+const MAX_INPUT_DELAY_S: f64 = uavgen::sim::plant_file::MAX_DELAY_S;
+
 /// `0.1` (every input) or `u_vz=0.13,u_roll=0.08` (the others 0), in seconds.
 fn parse_input_delay(spec: &str) -> Result<[f64; 4], String> {
     let bad = |what: &str| format!("--input-delay '{spec}': {what}");
     let check = |v: f64| {
-        if v.is_finite() && v >= 0.0 {
+        if v.is_finite() && (0.0..=MAX_INPUT_DELAY_S).contains(&v) {
             Ok(v)
         } else {
-            Err(bad("delays must be finite and >= 0 s"))
+            Err(bad(&format!(
+                "delays must be within [0, {MAX_INPUT_DELAY_S}] s, found {}",
+                uavgen::validate::short(v)
+            )))
         }
     };
     if let Ok(v) = spec.trim().parse::<f64>() {
@@ -235,9 +241,7 @@ fn estimate_response(logs: &[uavgen::logs::FlightLog], savgol: SavGol) -> Result
 }
 
 pub fn run(args: IdentifyArgs) -> Result<(), String> {
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to overwrite it", args.out.display()));
-    }
+    super::refuse_existing(&args.out, args.force)?;
     let name = args
         .name
         .clone()
@@ -285,6 +289,14 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             );
         }
         logs.push(log.with_stale(args.stale));
+    }
+    // Degenerate data is an error: with every state and input constant (an all-zero log, a
+    // vehicle on the ground) there is nothing to fit, and the fit would have no terms.
+    if logs.iter().all(constant_log) {
+        return Err(format!(
+            "{}: every state and input column is constant (an all-zero log, or a vehicle that never moved): there is nothing to identify",
+            args.logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+        ));
     }
     let (response, estimate) = match delay_spec {
         DelaySpec::None => (None, None),
@@ -401,6 +413,20 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     Ok(())
 }
 
+/// Is every state and input of `log` constant (within 1e-12)?
+fn constant_log(log: &uavgen::logs::FlightLog) -> bool {
+    let mut first: Option<([f64; 12], [f64; 4])> = None;
+    log.segments.iter().all(|seg| {
+        seg.x.iter().zip(&seg.u).all(|(x, u)| {
+            let (x0, u0) = *first.get_or_insert((*x, *u));
+            x.iter()
+                .zip(&x0)
+                .chain(u.iter().zip(&u0))
+                .all(|(a, b)| (a - b).abs() <= 1e-12)
+        })
+    })
+}
+
 /// The ridge weights `identify` tries in turn without --alpha (docs/sindy.md, "Ridge ladder").
 const RIDGE_LADDER: [f64; 3] = [1e-3, 1e-2, 1e-1];
 
@@ -511,6 +537,12 @@ fn fit_sindy(
             "  {:<10} {:>3} terms, training RMSE {:.4}, R² {:.3}",
             row.state, row.terms, row.rmse, row.r2
         );
+    }
+    if fit.rows.iter().all(|r| r.terms == 0) {
+        return Err(format!(
+            "{}: not written: the fit selected no term in any row (the logs do not excite the dynamics, or --threshold is too large)",
+            args.out.display()
+        ));
     }
     serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())
 }

@@ -15,3 +15,13 @@ use std::path::Path;
 pub fn write_atomically(path: &Path, text: &str) -> Result<(), String> {
     uavgen::sim::write_atomically(path, text).map_err(|e| e.to_string())
 }
+
+/// The one `--force` rule of every command that writes a file: an existing output is replaced only
+/// with `--force`. Checked before any work.
+pub fn refuse_existing(path: &Path, force: bool) -> Result<(), String> {
+    if path.exists() && !force {
+        Err(format!("{}: exists; pass --force to overwrite it", path.display()))
+    } else {
+        Ok(())
+    }
+}

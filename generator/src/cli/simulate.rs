@@ -18,7 +18,7 @@ pub struct SimulateArgs {
     /// Seed of every random process (excitation, noise, stale samples, turbulence).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Output log (LOG_FORMAT.md CSV).
+    /// Output log (docs/log-format.md CSV).
     #[arg(long)]
     out: PathBuf,
     /// Overwrite --out if it exists.
@@ -27,9 +27,7 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: SimulateArgs) -> Result<(), String> {
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to overwrite it", args.out.display()));
-    }
+    super::refuse_existing(&args.out, args.force)?;
     let options = SimulateOptions::parse(&args.profile, &args.duration, args.seed).map_err(|e| e.to_string())?;
     let plant = PlantFile::load(&args.plant).map_err(|e| e.to_string())?;
     let log = simulate(&plant, &options).map_err(|e| e.to_string())?;

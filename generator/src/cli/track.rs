@@ -102,13 +102,12 @@ fn write(path: &Path, text: &str) -> Result<(), String> {
 
 /// Runs `uavgen track`; Ok carries the exit status of the verdicts (0, 3 or 4).
 pub fn run(args: TrackArgs) -> Result<ExitCode, String> {
-    if args.out.exists() && !args.force {
-        return Err(format!("{}: exists; pass --force to replace it", args.out.display()));
-    }
-    if !(args.duration.is_finite() && args.duration > 0.0) {
+    super::refuse_existing(&args.out, args.force)?;
+    let max = uavgen::sim::run::MAX_DURATION_S;
+    if !(args.duration.is_finite() && args.duration > 0.0 && args.duration <= max) {
         return Err(format!(
-            "--duration: must be a positive number of seconds, got {}",
-            args.duration
+            "--duration: must be a positive number of seconds, at most {max}, got {}",
+            uavgen::validate::short(args.duration)
         ));
     }
     let rules = VerdictRules {

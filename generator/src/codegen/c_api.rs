@@ -31,7 +31,7 @@ pub const ABI_VERSION: u32 = 1;
 /// Alignment of the caller-owned storage in bytes (`<NAME>_STORAGE_ALIGN`).
 pub const STORAGE_ALIGN: usize = 16;
 
-/// Status codes: `(C suffix, value, meaning)`. 0..=4 are the solver's `Status` (an input is
+/// Status codes: `(C suffix, value, meaning)`. 0..=5 are the solver's `Status` (an input is
 /// returned and safe to apply); negative codes reject the call, which changes nothing.
 pub const STATUS_CODES: &[(&str, i32, &str)] = &[
     ("OK", 0, "the call succeeded (same value as SOLVED)"),
@@ -55,6 +55,11 @@ pub const STATUS_CODES: &[(&str, i32, &str)] = &[
         "NUMERICAL_FAILURE",
         4,
         "a non-finite value in the linearisation or the step: the previous plan is kept",
+    ),
+    (
+        "OUT_OF_ENVELOPE",
+        5,
+        "x0 or the reference lies outside ENVELOPE: the input is finite and within the bounds, the plan means nothing",
     ),
     ("NULL_POINTER", -1, "a pointer argument is NULL"),
     (
@@ -233,7 +238,7 @@ impl CApi<'_> {
  * aligned to {up}_STORAGE_ALIGN, zero-filled or initialised by {p}_init) and must not use one
  * storage from two threads at once. Every function checks its pointers: NULL, a misaligned or
  * uninitialised storage and overlapping arrays are refused with a negative status and change
- * nothing. Status 0..4 (the solver's) means an input was produced and is safe to apply: finite and
+ * nothing. Status 0..5 (the solver's) means an input was produced and is safe to apply: finite and
  * within [U_MIN, U_MAX] whatever the status. No function allocates, blocks or panics.
  */
 #ifndef {up}_H
@@ -281,7 +286,7 @@ typedef struct {p}_storage {{
     {up}_ALIGNAS({up}_STORAGE_ALIGN) unsigned char bytes[{up}_STORAGE_SIZE];
 }} {p}_storage;
 
-/* Status codes: 0..4 are the solver's statuses (an input was produced); negative codes reject the
+/* Status codes: 0..5 are the solver's statuses (an input was produced); negative codes reject the
  * call and change nothing. */
 typedef int32_t {p}_status;
 enum {p}_status_code {{

@@ -4,7 +4,7 @@ use super::{GenerateOptions, QpMethod};
 use crate::ir::ModelIr;
 use crate::model::Model;
 use crate::mpc_options::MpcOptions;
-use crate::symbolic::float_literal;
+use crate::symbolic::{float_literal, NonFiniteConstant};
 use proc_macro2::{Literal, TokenStream};
 use quote::quote;
 use std::collections::BTreeMap;
@@ -17,10 +17,13 @@ pub fn dims_values(
     substeps: usize,
     mpc: &MpcOptions,
     delays: &[f64],
-) -> BTreeMap<&'static str, TokenStream> {
-    let array = |values: &[f64]| {
-        let items = values.iter().map(|&v| float_literal(v, options.float));
-        quote!([#(#items),*])
+) -> Result<BTreeMap<&'static str, TokenStream>, NonFiniteConstant> {
+    let array = |values: &[f64]| -> Result<TokenStream, NonFiniteConstant> {
+        let items = values
+            .iter()
+            .map(|&v| float_literal(v, options.float))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(quote!([#(#items),*]))
     };
     let lit = |n: usize| {
         let l = Literal::usize_unsuffixed(n);
@@ -32,31 +35,49 @@ pub fn dims_values(
         quote!(#l)
     });
     // The guess's trust region: unbounded states are `Real::INFINITY`.
-    let trust = options.envelope.trust_bounds(&ir.state_names).into_iter().map(|b| {
-        if b.is_finite() {
-            float_literal(b, options.float)
-        } else {
-            quote!(Real::INFINITY)
-        }
-    });
-    BTreeMap::from([
+    let trust = options
+        .envelope
+        .trust_bounds(&ir.state_names)
+        .into_iter()
+        .map(|b| {
+            if b.is_finite() {
+                float_literal(b, options.float)
+            } else {
+                Ok(quote!(Real::INFINITY))
+            }
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let plausible = options
+        .envelope
+        .plausibility_bounds(&ir.state_names)
+        .into_iter()
+        .map(|b| {
+            if b.is_finite() {
+                float_literal(b, options.float)
+            } else {
+                Ok(quote!(Real::INFINITY))
+            }
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(BTreeMap::from([
         ("NX", lit(ir.nx)),
         ("NU", lit(ir.nu)),
         ("N", lit(options.horizon)),
-        ("DT", float_literal(1.0 / options.rate_hz, options.float)),
+        ("DT", float_literal(1.0 / options.rate_hz, options.float)?),
         ("SUBSTEPS", lit(substeps)),
-        ("Q", array(&mpc.q)),
-        ("Q_TERMINAL", array(&mpc.q_terminal)),
-        ("R", array(&mpc.r)),
-        ("U_MIN", array(&mpc.u_min)),
-        ("U_MAX", array(&mpc.u_max)),
-        ("INPUT_DELAY", array(delays)),
+        ("Q", array(&mpc.q)?),
+        ("Q_TERMINAL", array(&mpc.q_terminal)?),
+        ("R", array(&mpc.r)?),
+        ("U_MIN", array(&mpc.u_min)?),
+        ("U_MAX", array(&mpc.u_max)?),
+        ("INPUT_DELAY", array(delays)?),
         ("INPUT_DELAY_SAMPLES", quote!([#(#delay_samples),*])),
         ("MAX_QP_ITERATIONS", lit(mpc.max_qp_iterations)),
         ("MAX_IPM_ITERATIONS", lit(mpc.max_ipm_iterations)),
         ("TRUST_BOUND", quote!([#(#trust),*])),
-        ("REGULARISATION", float_literal(mpc.regularisation, options.float)),
-    ])
+        ("ENVELOPE", quote!([#(#plausible),*])),
+        ("REGULARISATION", float_literal(mpc.regularisation, options.float)?),
+    ]))
 }
 
 pub fn emit(model: &Model, ir: &ModelIr, qp: QpMethod) -> TokenStream {

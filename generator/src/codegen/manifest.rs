@@ -29,7 +29,27 @@ pub fn readme(
          let x_next = {crate_name}::discrete_dynamics(&x, &u);      // x⁺ = F(x, u)\n\
          let (a, b) = {crate_name}::discrete_jacobians(&x, &u);     // A = ∂F/∂x, B = ∂F/∂u\n\
          ```\n\n\
-         See uavgen's docs/generated-api.md for the full API.\n{c_api}",
+         ## Running the MPC\n\n\
+         One real-time iteration per sample: `prepare` with the reference window before the measurement \
+         arrives, `feedback` with the measured state, apply `u0`, `shift` when time advances by `DT`.\n\n\
+         ```rust,ignore\n\
+         use {crate_name}::{{Mpc, Real, Status, N, NX}};\n\n\
+         let mut mpc = Mpc::new();                          // `const fn`: may also be a `static`\n\
+         mpc.initialize(&x0, &[0.0; {crate_name}::NU]);     // guess: hold x0 with zero input\n\
+         loop {{\n\
+         \x20   let reference: [[Real; NX]; N + 1] = next_reference_window(); // states at t, t + DT, …, t + N·DT\n\
+         \x20   mpc.prepare(&reference);                       // linearise and factorise\n\
+         \x20   let x = measure();                             // the state estimate now\n\
+         \x20   let s = mpc.feedback(&x);                      // s.u0: finite, within U_MIN..U_MAX\n\
+         \x20   apply(s.u0);\n\
+         \x20   if s.status != Status::Solved {{ /* IterationCap, OutOfEnvelope, …: see docs/mpc.md */ }}\n\
+         \x20   mpc.shift();                                   // advance the guess by DT\n\
+         }}\n\
+         ```\n\n\
+         `mpc.solve(&x, &reference)` is `prepare` + `feedback` in one call. The weights, bounds and limits \
+         are the constants `Q`, `Q_TERMINAL`, `R`, `U_MIN`, `U_MAX`, `MAX_QP_ITERATIONS`; `ENVELOPE` bounds the \
+         plausible states. The `uavgen-runtime` crate wraps this loop (`Controller`, delay compensation).\n\n\
+         See uavgen's docs/generated-api.md and docs/mpc.md for the full API.\n{c_api}",
         model.name,
         model.kind_name(),
         options.float.name(),

@@ -127,6 +127,10 @@ pub enum GenerateError {
     Substeps(#[from] SubstepError),
     #[error("template: {0}")]
     Template(String),
+    #[error("{0}")]
+    Constant(#[from] crate::symbolic::NonFiniteConstant),
+    #[error("the model grows by e^{per_sample:.3} per sample somewhere in the envelope (eigenvalue {re:.4e}{im:+.4e}i 1/s of ∂f/∂x): no vehicle's dynamics diverge that fast; check its coefficients (at most e^{} per sample is accepted; docs/discretisation.md)", crate::validate::MAX_GROWTH_PER_SAMPLE)]
+    Unstable { re: f64, im: f64, per_sample: f64 },
 }
 
 /// The files of a generated crate, in memory.
@@ -210,6 +214,15 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         Some(m) => (m, None),
         None => {
             let choice = auto_substeps(&ir, dt, &options.envelope)?;
+            // The rule imposes nothing for unstable modes; an absurd growth rate is an error.
+            let per_sample = choice.fastest_growth.re * dt;
+            if per_sample > crate::validate::MAX_GROWTH_PER_SAMPLE {
+                return Err(GenerateError::Unstable {
+                    re: choice.fastest_growth.re,
+                    im: choice.fastest_growth.im,
+                    per_sample,
+                });
+            }
             (choice.substeps, Some(choice))
         }
     };
@@ -232,10 +245,10 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
 
     let dims = splice::specialise_dims(
         options.float.name(),
-        &lib_rs::dims_values(&ir, options, substeps, &mpc, &model.input_delays()),
+        &lib_rs::dims_values(&ir, options, substeps, &mpc, &model.input_delays())?,
     )
     .map_err(GenerateError::Template)?;
-    let (model_tokens, used_math) = model_rs::emit(&ir, options.float);
+    let (model_tokens, used_math) = model_rs::emit(&ir, options.float)?;
     let mut files = vec![
         (
             PathBuf::from("Cargo.toml"),

@@ -3,7 +3,7 @@
 
 use crate::ir::ModelIr;
 use crate::symbolic::emit::local_ident;
-use crate::symbolic::{Emitter, Float, Id};
+use crate::symbolic::{Emitter, Float, Id, NonFiniteConstant};
 use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 use std::collections::BTreeSet;
@@ -54,13 +54,14 @@ fn index(i: usize) -> proc_macro2::Literal {
 }
 
 /// The whole `model.rs` as tokens, and the math functions it calls.
-pub fn emit(ir: &ModelIr, float: Float) -> (TokenStream, BTreeSet<&'static str>) {
+pub fn emit(ir: &ModelIr, float: Float) -> Result<(TokenStream, BTreeSet<&'static str>), NonFiniteConstant> {
     let g = &ir.graph;
     let (binding, vars) = bind_variables(ir);
 
     // continuous_dynamics
     let mut em = Emitter::new(g, vars.clone(), float);
     let f_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
+    em.check()?;
     let f_stmts = em.take_statements();
     let mut used = em.used_functions().clone();
 
@@ -83,6 +84,7 @@ pub fn emit(ir: &ModelIr, float: Float) -> (TokenStream, BTreeSet<&'static str>)
             }
         }
     }
+    em.check()?;
     let jac_stmts = em.take_statements();
     used.extend(em.used_functions());
 
@@ -125,6 +127,7 @@ pub fn emit(ir: &ModelIr, float: Float) -> (TokenStream, BTreeSet<&'static str>)
         }
         rows.push(quote!(#row #(#extra)*));
     }
+    em.check()?;
     let s_stmts = em.take_statements();
     used.extend(em.used_functions());
     let imports = math_imports(&used);
@@ -166,5 +169,5 @@ pub fn emit(ir: &ModelIr, float: Float) -> (TokenStream, BTreeSet<&'static str>)
             (f, ds)
         }
     };
-    (tokens, used)
+    Ok((tokens, used))
 }

@@ -18,6 +18,8 @@ use std::path::{Path, PathBuf};
 pub enum WriteError {
     #[error("{0}: refusing to write into a non-empty directory that uavgen did not generate (no '{MARKER}' in its Cargo.toml); choose another --out or empty it")]
     NotOurs(PathBuf),
+    #[error("{dir}: holds files uavgen did not write ({}); regenerating would delete them: move them out, or pass --force to delete them", .files.join(", "))]
+    ForeignFiles { dir: PathBuf, files: Vec<String> },
     #[error("{0}: exists and is not a directory")]
     NotADirectory(PathBuf),
     #[error("{path}: {source}")]
@@ -51,9 +53,65 @@ pub fn check_target(dir: &Path) -> Result<(), WriteError> {
     }
 }
 
-/// Write `files` (paths relative to `dir`) as the whole content of `dir`.
+/// The files under `dir` (relative paths, sorted) that are not among `files` and are not build
+/// products (`target/`, `Cargo.lock`): what a user added to a generated crate.
+pub fn foreign_files(dir: &Path, files: &[(PathBuf, String)]) -> Result<Vec<String>, WriteError> {
+    fn walk(root: &Path, rel: &Path, out: &mut Vec<PathBuf>) -> Result<(), WriteError> {
+        let here = root.join(rel);
+        for entry in fs::read_dir(&here).map_err(io_err(&here))? {
+            let entry = entry.map_err(io_err(&here))?;
+            let path = rel.join(entry.file_name());
+            if entry.file_type().map_err(io_err(&here))?.is_dir() {
+                walk(root, &path, out)?;
+            } else {
+                out.push(path);
+            }
+        }
+        Ok(())
+    }
+    if !dir.is_dir() {
+        return Ok(Vec::new());
+    }
+    let mut found = Vec::new();
+    for entry in fs::read_dir(dir).map_err(io_err(dir))? {
+        let entry = entry.map_err(io_err(dir))?;
+        let name = entry.file_name();
+        if name == "target" || name == "Cargo.lock" {
+            continue;
+        }
+        if entry.file_type().map_err(io_err(dir))?.is_dir() {
+            walk(dir, Path::new(&name), &mut found)?;
+        } else {
+            found.push(PathBuf::from(name));
+        }
+    }
+    let mut foreign: Vec<String> = found
+        .into_iter()
+        .filter(|p| !files.iter().any(|(f, _)| f == p))
+        .map(|p| p.display().to_string())
+        .collect();
+    foreign.sort();
+    Ok(foreign)
+}
+
+/// Write `files` (paths relative to `dir`) as the whole content of `dir`; refuses when `dir`
+/// holds files the generator did not write ([`foreign_files`]).
 pub fn write_all(dir: &Path, files: &[(PathBuf, String)]) -> Result<(), WriteError> {
+    write_all_with(dir, files, false)
+}
+
+/// [`write_all`]; with `force`, files a user added to a generated crate are deleted too.
+pub fn write_all_with(dir: &Path, files: &[(PathBuf, String)], force: bool) -> Result<(), WriteError> {
     check_target(dir)?;
+    if !force {
+        let foreign = foreign_files(dir, files)?;
+        if !foreign.is_empty() {
+            return Err(WriteError::ForeignFiles {
+                dir: dir.to_owned(),
+                files: foreign,
+            });
+        }
+    }
     let parent = match dir.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
         _ => PathBuf::from("."),
@@ -65,7 +123,14 @@ pub fn write_all(dir: &Path, files: &[(PathBuf, String)]) -> Result<(), WriteErr
         .unwrap_or_else(|| "out".into());
     let staging = parent.join(format!(".{base}.uavgen-staging-{}", std::process::id()));
     let old = parent.join(format!(".{base}.uavgen-old-{}", std::process::id()));
-    let result = stage_and_swap(dir, &staging, &old, files);
+    // Errors name the target the user gave, not the internal staging directory.
+    let result = stage_and_swap(dir, &staging, &old, files).map_err(|e| match e {
+        WriteError::Io { path, source } if path.starts_with(&staging) || path.starts_with(&old) => WriteError::Io {
+            path: dir.to_owned(),
+            source,
+        },
+        e => e,
+    });
     // Leave no staging directory behind. The previous crate is deleted only
     // once the new one is complete in its place; after a failure whatever is
     // left of it stays in the hidden `.NAME.uavgen-old-PID` beside it.

@@ -12,6 +12,13 @@ use std::f64::consts::PI;
 /// over ±`acceleration` (vx, vy, vz) or ±`angular_acceleration` (the rates).
 /// The guess's trust region is this many times the envelope ([`Envelope::trust_bounds`]).
 pub const TRUST_FACTOR: f64 = 2.0;
+/// The plausibility envelope ([`Envelope::plausibility_bounds`]) is this many times the envelope
+/// on velocities, body rates and lag states.
+pub const PLAUSIBILITY_FACTOR: f64 = 10.0;
+/// Largest plausible |roll|, |pitch|, rad (86°: the Euler angles are singular at π/2).
+pub const PLAUSIBLE_TILT: f64 = 1.5;
+/// Largest plausible |x|, |y|, |z|, m.
+pub const PLAUSIBLE_POSITION: f64 = 1e4;
 
 #[derive(Clone, Debug)]
 pub struct Envelope {
@@ -95,6 +102,26 @@ impl Envelope {
             .map(|name| match name.as_str() {
                 "roll" | "pitch" => TRUST_FACTOR * self.tilt,
                 "roll_rate" | "pitch_rate" | "yaw_rate" => TRUST_FACTOR * self.angular_rate,
+                _ => f64::INFINITY,
+            })
+            .collect()
+    }
+
+    /// The plausibility envelope of the generated MPC's x₀ and reference (`ENVELOPE` of the
+    /// generated crate; docs/mpc.md, "Plausibility"): |xᵢ| ≤ bound, `f64::INFINITY` where there is
+    /// none. Positions 10 km, roll and pitch 1.5 rad (the Euler angles are singular at π/2), and
+    /// [`PLAUSIBILITY_FACTOR`] times the envelope on velocities, body rates and the lag states;
+    /// yaw (unwrapped), `flight_time` and states of other names are unbounded.
+    pub fn plausibility_bounds(&self, states: &[String]) -> Vec<f64> {
+        states
+            .iter()
+            .map(|name| match name.as_str() {
+                "x" | "y" | "z" => PLAUSIBLE_POSITION,
+                "roll" | "pitch" => PLAUSIBLE_TILT,
+                "vx" | "vy" | "vz" | "roll_rate" | "pitch_rate" | "yaw_rate" => PLAUSIBILITY_FACTOR * self.bound(name),
+                n if n.ends_with(DOT_LAGGED_SUFFIX) || n.ends_with(LAGGED_SUFFIX) => {
+                    PLAUSIBILITY_FACTOR * self.range(n).1
+                }
                 _ => f64::INFINITY,
             })
             .collect()

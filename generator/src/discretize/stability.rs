@@ -37,6 +37,9 @@ pub struct SubstepChoice {
     pub substeps: usize,
     pub stiffest: Complex<f64>,
     pub points: usize,
+    /// The eigenvalue with the largest real part over the envelope (0 if every one is stable):
+    /// the rule imposes nothing for it, the code generator refuses absurd growth rates.
+    pub fastest_growth: Complex<f64>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -94,6 +97,7 @@ pub fn auto_substeps(ir: &ModelIr, dt: f64, envelope: &Envelope) -> Result<Subst
         substeps: 1,
         stiffest: Complex::new(0.0, 0.0),
         points: points.len(),
+        fastest_growth: Complex::new(0.0, 0.0),
     };
     for p in &points {
         let (x, u) = p.split_at(ir.nx);
@@ -104,6 +108,9 @@ pub fn auto_substeps(ir: &ModelIr, dt: f64, envelope: &Envelope) -> Result<Subst
         }
         for lambda in eigenvalues(&a) {
             if lambda.re >= 0.0 {
+                if lambda.re > best.fastest_growth.re {
+                    best.fastest_growth = lambda;
+                }
                 continue;
             }
             let need = (1..=MAX_SUBSTEPS)

@@ -92,6 +92,14 @@ pub enum EvaluateError {
     },
     #[error("metrics: {0}")]
     Metrics(#[from] MetricsError),
+    #[error("{files}: no segment has two samples: a one-step prediction needs a sample and the next one")]
+    TooShort { files: String },
+    #[error("{files}: the horizon of {horizon} samples is not shorter than any segment (the longest has {longest} samples): no horizon run can be scored; pass a smaller --horizon")]
+    HorizonTooLong {
+        files: String,
+        horizon: usize,
+        longest: usize,
+    },
     #[error("{path}: cannot write the plot: {message}")]
     Plot { path: String, message: String },
 }
@@ -583,6 +591,24 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
             horizon,
             whole_flight,
             segments,
+        });
+    }
+    // Degenerate data is an error, not an evaluation with nothing in it.
+    let files = || logs.iter().map(|l| l.source.as_str()).collect::<Vec<_>>().join(", ");
+    if total.next_made == 0 {
+        return Err(EvaluateError::TooShort { files: files() });
+    }
+    if total.horizon_runs == 0 {
+        let longest = logs
+            .iter()
+            .flat_map(|l| &l.segments)
+            .map(|s| s.len())
+            .max()
+            .unwrap_or(0);
+        return Err(EvaluateError::HorizonTooLong {
+            files: files(),
+            horizon: h,
+            longest,
         });
     }
     let (one_step_derivative, one_step_next, horizon, whole_flight) = total.finish(h, &names)?;

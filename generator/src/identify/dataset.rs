@@ -92,8 +92,12 @@ pub enum DatasetError {
         segment: usize,
         error: PreprocessError,
     },
-    #[error("no segment is long enough for the Savitzky-Golay window {window}")]
-    Empty { window: usize },
+    #[error("{files}: no segment is long enough for the Savitzky-Golay window {window} and the input delays (the longest has {longest} samples)")]
+    Empty {
+        files: String,
+        window: usize,
+        longest: usize,
+    },
 }
 
 /// Build the dataset; segments shorter than the window are skipped.
@@ -165,7 +169,14 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
     }
     if segments.is_empty() {
         return Err(DatasetError::Empty {
+            files: logs.iter().map(|l| l.source.as_str()).collect::<Vec<_>>().join(", "),
             window: options.savgol.window,
+            longest: logs
+                .iter()
+                .flat_map(|l| &l.segments)
+                .map(|s| s.t.len())
+                .max()
+                .unwrap_or(0),
         });
     }
     Ok(Dataset { segments })

@@ -25,6 +25,9 @@ pub enum LogErrorKind {
     NotNumeric,
     /// A cell of a known column is NaN or infinite (or overflows f64).
     NonFinite,
+    /// A cell of a known column is finite but beyond the range of any flight
+    /// (|value| > [`crate::validate::LOG_MAX_ABS`]; docs/logs.md).
+    OutOfRange,
     /// `t` goes backwards or repeats within a segment.
     TimeNotIncreasing,
     /// A header but no data rows.

@@ -332,7 +332,18 @@ fn number(file: &str, line: usize, column: &str, field: usize, cell: &str) -> Re
         ));
     }
     match cell.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
+        Ok(v) if v.is_finite() && v.abs() <= max_abs(column) => Ok(v),
+        Ok(v) if v.is_finite() => Err(LogError::new(
+            file,
+            Some(line),
+            Some(column),
+            K::OutOfRange,
+            format!(
+                "{at}: {} is out of range: this column's values must be within ±{} (docs/logs.md)",
+                crate::validate::short(v),
+                crate::validate::short(max_abs(column))
+            ),
+        )),
         Ok(_) => Err(LogError::new(
             file,
             Some(line),
@@ -347,6 +358,15 @@ fn number(file: &str, line: usize, column: &str, field: usize, cell: &str) -> Re
             K::NotNumeric,
             format!("{at}: `{}` is not a number", quote(cell)),
         )),
+    }
+}
+
+/// The largest magnitude a column's values may have: time stamps may be Unix times.
+fn max_abs(column: &str) -> f64 {
+    if column == "t" {
+        crate::validate::LOG_TIME_MAX_ABS
+    } else {
+        crate::validate::LOG_MAX_ABS
     }
 }
 
@@ -411,7 +431,7 @@ mod tests {
         assert_eq!(integer("f", 1, 0, "-2.0").unwrap(), -2);
         assert_eq!(integer("f", 1, 0, "1.5").unwrap_err().kind, K::NotNumeric);
         assert_eq!(integer("f", 1, 0, "nan").unwrap_err().kind, K::NonFinite);
-        assert_eq!(integer("f", 1, 0, "1e300").unwrap_err().kind, K::NotNumeric);
+        assert_eq!(integer("f", 1, 0, "1e300").unwrap_err().kind, K::OutOfRange);
     }
 
     #[test]

@@ -4,6 +4,7 @@ use super::error::{ModelError, ModelErrorKind as K};
 use super::file::{PdFile, SindyFile, DEFAULT_INPUTS, DEFAULT_STATES, FORMAT};
 use super::term::{parse_term, TermError};
 use super::{Corrections, Dynamics, Model, PdParams, Row, SindySpec, Source};
+use crate::validate;
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 use sha2::{Digest, Sha256};
@@ -26,6 +27,7 @@ pub fn load(path: &Path) -> Result<Model, ModelError> {
 
 /// Validate model text; `label` names the file in errors.
 pub fn parse(text: &str, label: &str) -> Result<Model, ModelError> {
+    let text = crate::validate::strip_bom(text);
     let mut value: Value = serde_json::from_str(text).map_err(|e| json_syntax_error(text, label, &e))?;
     let obj = value
         .as_object_mut()
@@ -53,9 +55,12 @@ pub fn parse(text: &str, label: &str) -> Result<Model, ModelError> {
         file: label.to_owned(),
         sha256: hex_sha256(text.as_bytes()),
     };
+    // Every number the model reads is bounded; the kind's own ranges (mass, gravity, ξ,
+    // coefficients) are checked first, so that their messages, which name the range, win.
+    let huge = validate::first_out_of_range(&Value::Object(obj.clone()), validate::MODEL_MAX_ABS, &["provenance"]);
     // The corrections block belongs to every kind and is read on its own, after the kind's schema.
     let corrections = obj.remove("corrections");
-    match obj.get("kind").cloned() {
+    let model = match obj.get("kind").cloned() {
         None => Err(ModelError::new(
             label,
             "kind",
@@ -76,7 +81,20 @@ pub fn parse(text: &str, label: &str) -> Result<Model, ModelError> {
             K::UnknownKind,
             format!("unknown kind {other}: expected \"pd\" or \"sindy\""),
         )),
+    }?;
+    if let Some((path, v)) = huge {
+        return Err(ModelError::new(
+            label,
+            path,
+            K::BadValue,
+            format!(
+                "{} is out of range: every number of a model file must be within ±{} (docs/model-format.md#ranges)",
+                validate::short(v),
+                validate::short(validate::MODEL_MAX_ABS)
+            ),
+        ));
     }
+    Ok(model)
 }
 
 fn corrections_schema(value: Option<Value>, label: &str) -> Result<Option<Corrections>, ModelError> {
@@ -230,9 +248,13 @@ fn validate_pd(f: PdFile, corrections: Option<Corrections>, label: &str, source:
             label,
             "mass",
             K::BadValue,
-            format!("mass must be positive, found {mass}"),
+            format!("mass must be positive, found {}", validate::short(mass)),
         ));
     }
+    validate::within(mass, validate::MASS_KG, "kg")
+        .map_err(|m| ModelError::new(label, "mass", K::BadValue, format!("mass {m}")))?;
+    validate::within(gravity, validate::GRAVITY, "m/s²")
+        .map_err(|m| ModelError::new(label, "gravity", K::BadValue, format!("gravity {m}")))?;
     let mut xi = [0.0; 16];
     match &f.xi {
         Value::Array(items) => {
@@ -294,6 +316,10 @@ fn validate_pd(f: PdFile, corrections: Option<Corrections>, label: &str, source:
             format!("xi.xi{k}")
         }
     };
+    for k in 1..=16 {
+        validate::bounded(p.xi(k), validate::XI_MAX_ABS)
+            .map_err(|m| ModelError::new(label, loc(k), K::BadValue, format!("ξ{k} {m}")))?;
+    }
     for (k, what) in [(14, "Ix"), (15, "Iy"), (16, "Iz")] {
         if p.xi(k) <= 0.0 {
             return Err(ModelError::new(
@@ -334,6 +360,52 @@ fn finish(mut model: Model, corrections: Option<Corrections>, label: &str) -> Re
     }
     model.corrections = corrections;
     model.name = name(label, std::mem::take(&mut model.name))?;
+    for (what, n, max) in [
+        ("states", model.states.len(), validate::MAX_STATES),
+        ("inputs", model.inputs.len(), validate::MAX_INPUTS),
+    ] {
+        if n > max {
+            return Err(ModelError::new(
+                label,
+                what,
+                K::WrongCount,
+                format!("{n} {what}: at most {max} are supported (with the extra states of the corrections; docs/model-format.md#ranges)"),
+            ));
+        }
+    }
+    if let Dynamics::Sindy(s) = &model.dynamics {
+        let coefficients: usize = s
+            .rows
+            .iter()
+            .map(|r| match r {
+                Row::Sparse(entries) => entries.len(),
+                Row::Kinematic(_) => 0,
+            })
+            .sum();
+        if coefficients > validate::MAX_COEFFICIENTS {
+            return Err(ModelError::new(
+                label,
+                "coefficients",
+                K::WrongCount,
+                format!(
+                    "{coefficients} coefficients: at most {} are supported (the generated code grows with them; docs/model-format.md#ranges)",
+                    validate::MAX_COEFFICIENTS
+                ),
+            ));
+        }
+        if s.library.len() > validate::MAX_LIBRARY_TERMS {
+            return Err(ModelError::new(
+                label,
+                "library",
+                K::WrongCount,
+                format!(
+                    "{} library terms: at most {} are supported (docs/model-format.md#ranges)",
+                    s.library.len(),
+                    validate::MAX_LIBRARY_TERMS
+                ),
+            ));
+        }
+    }
     Ok(model)
 }
 
@@ -431,6 +503,14 @@ fn validate_sindy(
             )
         })?;
         finite(label, &format!("{loc}.coefficient"), c.coefficient)?;
+        validate::bounded(c.coefficient, validate::COEFFICIENT_MAX_ABS).map_err(|m| {
+            ModelError::new(
+                label,
+                format!("{loc}.coefficient"),
+                K::BadValue,
+                format!("a coefficient {m}"),
+            )
+        })?;
         if matches!(rows[si], Some(Row::Kinematic(_))) {
             return Err(ModelError::new(
                 label,

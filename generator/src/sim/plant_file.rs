@@ -328,7 +328,7 @@ impl PlantFile {
 
     /// Validate plant-file text; `source` names the file in errors and in [`PlantFile::source`].
     pub fn parse(text: &str, source: &str) -> Result<PlantFile, PlantError> {
-        let value = json_value(text, source)?;
+        let value = json_value(crate::validate::strip_bom(text), source)?;
         let obj = value
             .as_object()
             .ok_or_else(|| PlantError::new(source, "", K::Json, "the top level must be a JSON object"))?;
@@ -379,6 +379,8 @@ impl PlantFile {
         }
         let ve = &self.vehicle;
         v.positive("vehicle.mass", ve.mass)?;
+        v.within("vehicle.mass", ve.mass, crate::validate::MASS_KG, "kg")?;
+        v.within("vehicle.gravity", ve.gravity, crate::validate::GRAVITY, "m/s²")?;
         for (i, x) in ve.inertia.iter().enumerate() {
             v.positive(&format!("vehicle.inertia[{i}]"), *x)?;
         }
@@ -556,14 +558,15 @@ impl PlantFile {
             v.non_negative("effects.ground_effect.rotor_height", g.rotor_height)?;
         }
         if let Some(n) = &e.sensor_noise {
-            for (name, s) in [
-                ("pos", n.pos),
-                ("vel", n.vel),
-                ("att", n.att),
-                ("rate", n.rate),
-                ("volt", n.volt),
+            // Standard deviations a sensor can have; beyond them the log is noise.
+            for (name, s, max, unit) in [
+                ("pos", n.pos, 100.0, "m"),
+                ("vel", n.vel, 100.0, "m/s"),
+                ("att", n.att, std::f64::consts::PI, "rad"),
+                ("rate", n.rate, 100.0, "rad/s"),
+                ("volt", n.volt, 100.0, "V"),
             ] {
-                v.non_negative(&format!("effects.sensor_noise.{name}"), s)?;
+                v.within(&format!("effects.sensor_noise.{name}"), s, (0.0, max), unit)?;
             }
         }
         if let Some(s) = &e.sample_hold {
@@ -603,17 +606,35 @@ impl Validator<'_> {
         PlantError::new(self.file, field, K::OutOfRange, message)
     }
 
+    /// Finite and within ±[`crate::validate::PLANT_MAX_ABS`] (every number of a plant file).
     fn finite(&self, field: &str, x: f64) -> Result<(), PlantError> {
-        if x.is_finite() {
-            Ok(())
-        } else {
+        if !x.is_finite() {
             Err(PlantError::new(
                 self.file,
                 field,
                 K::NonFinite,
                 format!("non-finite value {x}: every number must be finite"),
             ))
+        } else if x.abs() > crate::validate::PLANT_MAX_ABS {
+            Err(self.range(
+                field,
+                format!(
+                    "{} is out of range: every number of a plant file must be within ±{} (docs/plant-format.md)",
+                    crate::validate::short(x),
+                    crate::validate::short(crate::validate::PLANT_MAX_ABS)
+                ),
+            ))
+        } else {
+            Ok(())
         }
+    }
+
+    /// Within `range` (and finite).
+    fn within(&self, field: &str, x: f64, range: (f64, f64), unit: &str) -> Result<(), PlantError> {
+        self.finite(field, x)?;
+        crate::validate::within(x, range, unit)
+            .map(|_| ())
+            .map_err(|m| self.range(field, m))
     }
 
     fn positive(&self, field: &str, x: f64) -> Result<(), PlantError> {

@@ -21,6 +21,8 @@ pub struct Emitter<'g> {
     prefix: String,
     float: Float,
     used_functions: BTreeSet<&'static str>,
+    /// The first constant that had no literal (its place holds `0.0`; see [`Emitter::check`]).
+    error: Option<NonFiniteConstant>,
 }
 
 /// Floating-point type of emitted code.
@@ -40,19 +42,36 @@ impl Float {
     }
 }
 
+/// A constant that has no literal in the generated code's float type: NaN, infinite, or (for
+/// f32) beyond f32's range. Model validation keeps every parameter far inside these limits, so
+/// this is reached only through a constant folded from extreme values.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("the constant {} folded from the model has no {} literal (not finite); check the model's parameters against the ranges of docs/model-format.md#ranges", crate::validate::short(*.value), .float.name())]
+pub struct NonFiniteConstant {
+    pub value: f64,
+    pub float: Float,
+}
+
 /// A float literal (unsuffixed, so it takes the type `Real` of its context),
-/// written with the shortest digits that round-trip in `float`.
-pub fn float_literal(value: f64, float: Float) -> TokenStream {
-    assert!(value.is_finite(), "non-finite constant reached the emitter");
+/// written with the shortest digits that round-trip in `float`; an error for a value that is
+/// not finite in `float`.
+pub fn float_literal(value: f64, float: Float) -> Result<TokenStream, NonFiniteConstant> {
+    let finite = match float {
+        Float::F64 => value.is_finite(),
+        Float::F32 => (value as f32).is_finite(),
+    };
+    if !finite {
+        return Err(NonFiniteConstant { value, float });
+    }
     let lit = match float {
         Float::F64 => Literal::f64_unsuffixed(value.abs()),
         Float::F32 => Literal::f32_unsuffixed(value.abs() as f32),
     };
-    if value.is_sign_negative() {
+    Ok(if value.is_sign_negative() {
         quote!(-#lit)
     } else {
         quote!(#lit)
-    }
+    })
 }
 
 impl<'g> Emitter<'g> {
@@ -68,6 +87,7 @@ impl<'g> Emitter<'g> {
             prefix: "t".into(),
             float,
             used_functions: BTreeSet::new(),
+            error: None,
         }
     }
 
@@ -89,6 +109,11 @@ impl<'g> Emitter<'g> {
     }
 
     /// Names of the math functions (`sin`, `cos`, `sqrt`, `powi`) the statements call.
+    /// `Err` if a constant had no literal: the emitted code is then wrong and must be dropped.
+    pub fn check(&self) -> Result<(), NonFiniteConstant> {
+        self.error.map_or(Ok(()), Err)
+    }
+
     pub fn used_functions(&self) -> &BTreeSet<&'static str> {
         &self.used_functions
     }
@@ -99,7 +124,12 @@ impl<'g> Emitter<'g> {
 
     fn bind(&mut self, id: Id) -> TokenStream {
         let rhs = match self.g.node(id) {
-            Node::Const(bits) => return float_literal(f64::from_bits(bits), self.float),
+            Node::Const(bits) => {
+                return float_literal(f64::from_bits(bits), self.float).unwrap_or_else(|e| {
+                    self.error.get_or_insert(e);
+                    quote!(0.0)
+                })
+            }
             Node::Var(v) => return self.vars[v as usize].clone(),
             Node::Add(a, b) => {
                 let (a, b) = (self.get(a), self.get(b));

@@ -7,6 +7,6 @@ pub mod eval;
 pub mod expr;
 
 pub use diff::{diff, jacobian};
-pub use emit::{float_literal, Emitter, Float};
+pub use emit::{float_literal, Emitter, Float, NonFiniteConstant};
 pub use eval::Tape;
 pub use expr::{Func, Graph, Id, Node};

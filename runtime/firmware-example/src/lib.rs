@@ -80,6 +80,7 @@ fn error_code(kind: ControlErrorKind) -> u32 {
         ControlErrorKind::SolverInvalidInput => 5,
         ControlErrorKind::NumericalFailure => 6,
         ControlErrorKind::Reference(_) => 7,
+        ControlErrorKind::OutOfEnvelope => 8,
     }
 }
 

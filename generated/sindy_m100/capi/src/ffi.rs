@@ -25,7 +25,7 @@ use core::ptr;
 
 use sindy_m100::{discrete_dynamics, Mpc, Real, Solution, Status, N, NU, NX};
 
-/// The status codes of the header (`<NAME>_<CODE>`). 0..=4 are the solver's statuses (an input was
+/// The status codes of the header (`<NAME>_<CODE>`). 0..=5 are the solver's statuses (an input was
 /// produced and is safe to apply); negative codes reject the call, which changes nothing.
 pub mod status {
     /// the call succeeded (same value as SOLVED).
@@ -40,6 +40,8 @@ pub mod status {
     pub const INVALID_INPUT: i32 = 3;
     /// a non-finite value in the linearisation or the step: the previous plan is kept.
     pub const NUMERICAL_FAILURE: i32 = 4;
+    /// x0 or the reference lies outside ENVELOPE: the input is finite and within the bounds, the plan means nothing.
+    pub const OUT_OF_ENVELOPE: i32 = 5;
     /// a pointer argument is NULL.
     pub const NULL_POINTER: i32 = -1;
     /// the storage is not aligned to STORAGE_ALIGN (arrays may have any alignment).
@@ -101,6 +103,7 @@ fn status_code(status: Status) -> i32 {
         Status::HessianRegularised => status::HESSIAN_REGULARISED,
         Status::InvalidInput => status::INVALID_INPUT,
         Status::NumericalFailure => status::NUMERICAL_FAILURE,
+        Status::OutOfEnvelope => status::OUT_OF_ENVELOPE,
     }
 }
 
