@@ -508,17 +508,7 @@ fn identify_and_evaluate_from_logs() {
         ("sindy", &["--sweep", "--sweep-values", "5,10,20,40"][..]),
     ] {
         let out = tmp.path().join(format!("{method}.json"));
-        let mut args = vec![
-            "identify",
-            "--method",
-            method,
-            "--log",
-            log.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        let o = uavgen(&args);
+        let o = common::identify(method, &log, &out, extra);
         assert!(o.status.success(), "{method}: {}", stderr(&o));
         assert!(stderr(&o).contains("stayed bounded"), "{method}: {}", stderr(&o));
         let model = uavgen::load(&out).unwrap_or_else(|e| panic!("{e}"));

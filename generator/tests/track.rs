@@ -5,7 +5,7 @@ use std::fs;
 
 mod common;
 
-use common::{stderr, uavgen};
+use common::{identify, stderr, uavgen};
 
 fn report(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
@@ -265,17 +265,7 @@ fn models_identified_on_m100_like_track_every_trajectory_within_the_bounds() {
             (std::path::PathBuf::from(shipped(method)), "circle")
         } else {
             let model = tmp.path().join(format!("{method}.json"));
-            let mut args = vec![
-                "identify",
-                "--method",
-                method,
-                "--log",
-                log.to_str().unwrap(),
-                "--out",
-                model.to_str().unwrap(),
-            ];
-            args.extend(extra);
-            let o = uavgen(&args);
+            let o = identify(method, &log, &model, &extra);
             assert!(o.status.success(), "{method}: {}", stderr(&o));
             (model, "sinusoid,circle,spiral")
         };

@@ -70,24 +70,13 @@ pub fn quat_to_matrix(q: [f64; 4]) -> Option<Mat3> {
     if !(n.is_finite() && n > 1e-12) {
         return None;
     }
-    let [w, x, y, z] = [q[0] / n, q[1] / n, q[2] / n, q[3] / n];
-    Some([
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ])
+    // The simulator's rigid-body convention is this one (Hamilton, body → inertial).
+    Some(crate::sim::rigid_body::quat_to_matrix([
+        q[0] / n,
+        q[1] / n,
+        q[2] / n,
+        q[3] / n,
+    ]))
 }
 
 /// A unit quaternion `[w, x, y, z]` of a rotation matrix (Shepperd's method; w ≥ 0).

@@ -23,3 +23,18 @@ pub fn uavgen(args: &[&str]) -> Output {
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
+
+/// `uavgen identify --method METHOD --log LOG --out OUT EXTRA…`.
+pub fn identify(method: &str, log: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "identify",
+        "--method",
+        method,
+        "--log",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    uavgen(&args)
+}
