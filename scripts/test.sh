@@ -33,8 +33,10 @@ cargo build --release -q --target thumbv7em-none-eabihf -p sindy_m100_capi
 capi=target/thumbv7em-none-eabihf/release/libsindy_m100_capi.a
 test -s "$capi" || { echo "$capi was not built" >&2; exit 1; }
 if command -v llvm-nm >/dev/null; then
+    # The symbol table once (a `grep -q` on the pipe would stop llvm-nm early: SIGPIPE under pipefail).
+    defined=$(llvm-nm --defined-only "$capi" 2>/dev/null)
     for symbol in sindy_m100_init sindy_m100_prepare sindy_m100_feedback sindy_m100_shift sindy_m100_solve; do
-        llvm-nm --defined-only "$capi" 2>/dev/null | grep -q " T $symbol\$" ||
+        grep -q " T $symbol\$" <<<"$defined" ||
             { echo "$capi does not define $symbol" >&2; exit 1; }
     done
     echo "$capi defines the ABI's functions"
@@ -42,7 +44,7 @@ fi
 if command -v arm-none-eabi-gcc >/dev/null && command -v make >/dev/null; then
     # A freestanding C program for Cortex-M7 (hard-float EABI) links against it, with no panic path.
     make -s -C examples/c cortex-m
-    if arm-none-eabi-nm target/c-example/cortex_m.elf | grep -qi panic; then
+    if grep -qi panic <<<"$(arm-none-eabi-nm target/c-example/cortex_m.elf)"; then
         echo "examples/c/cortex_m.c: a panic path is linked in" >&2
         exit 1
     fi
@@ -55,7 +57,7 @@ echo "== firmware example links a generated solver (thumbv7em-none-eabihf, panic
 if command -v llvm-nm >/dev/null; then
     for bin in sindy_m100 pd_hover_f32; do
         elf=runtime/firmware-example/target/thumbv7em-none-eabihf/release/$bin
-        if llvm-nm "$elf" | grep -qi panic; then
+        if grep -qi panic <<<"$(llvm-nm "$elf")"; then
             echo "$bin: a panic path is linked into the firmware (see llvm-objdump -d)" >&2
             exit 1
         fi
