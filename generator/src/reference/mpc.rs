@@ -236,6 +236,11 @@ impl GenericMpc {
         &self.x_guess
     }
 
+    /// The model the MPC predicts with.
+    pub fn ir(&self) -> &ModelIr {
+        &self.ir
+    }
+
     pub fn problem(&self) -> &MpcProblem {
         &self.problem
     }

@@ -176,9 +176,6 @@ pub struct GenericBackend {
     t: f64,
     dt: f64,
     nx: usize,
-    /// The model lowered once more, for the delay prediction, and its RK4 substeps.
-    ir: ModelIr,
-    substeps: usize,
     /// Input delay per channel in samples, and the inputs sent, the latest first (D of them).
     delays: Vec<usize>,
     history: Vec<Vec<f64>>,
@@ -200,8 +197,6 @@ impl GenericBackend {
             t: 0.0,
             dt,
             nx: model.nx(),
-            ir: ModelIr::new(model),
-            substeps,
             delays,
             history: Vec::new(),
         }
@@ -226,7 +221,9 @@ impl GenericBackend {
                     self.history.get(age - 1).map_or(0.0, |h| h[i])
                 })
                 .collect();
-            xm = crate::discretize::discrete_step(&self.ir, &xm, &u, self.dt, self.substeps);
+            // The MPC's own model and substeps (the crate's `discrete_dynamics` in the harness).
+            let p = self.mpc.problem();
+            xm = crate::discretize::discrete_step(self.mpc.ir(), &xm, &u, p.dt, p.substeps);
         }
         xm
     }
