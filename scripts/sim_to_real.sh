@@ -27,7 +27,7 @@ horizon() { # model -> overall horizon RMSE on run 7 (default options: stale row
 # (scripts/identify_m100.sh): identify's defaults (input delays estimated, stale rows interpolated,
 # BIC, the ridge ladder) with the sweep 16 ... 64. (With the full default sweep the SINDy model of
 # runs 1-5 passes its horizon check but predicts run 7 worse than the base models: docs/identification.md.)
-SETTINGS=(--sweep-values 16,20,24,32,40,48,64)
+SETTINGS=(${SETTINGS_OVERRIDE:-})
 # R: identified on runs 1-5 with these settings.
 $U identify --method sindy "${TRAIN[@]}" "${SETTINGS[@]}" --out "$OUT/R.json" --force >/dev/null 2>&1
 RH=$(horizon "$OUT/R.json")

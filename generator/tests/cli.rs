@@ -708,7 +708,15 @@ fn identify_input_delay_none_keeps_the_inputs_as_logged() {
     let v: serde_json::Value = serde_json::from_str(&fs::read_to_string(&out).unwrap()).unwrap();
     assert!(v.get("corrections").is_none(), "{v}");
     let logs = vec![uavgen::logs::read_log(&log).unwrap()];
-    let data = build(&logs, &DatasetOptions::default()).unwrap();
+    // identify's SINDy default: the integral form.
+    let data = build(
+        &logs,
+        &DatasetOptions {
+            targets: uavgen::identify::dataset::Targets::Trapezoid,
+            ..DatasetOptions::default()
+        },
+    )
+    .unwrap();
     let options = SindyOptions {
         optimizer: Optimizer::Stlsq {
             threshold: 5.0,

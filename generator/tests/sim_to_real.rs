@@ -1,5 +1,5 @@
 //! The sim-to-real protocol of docs/diagnosis.md on a reduced set: a SINDy base model identified
-//! (with the settings of the shipped sindy_m100, [`SETTINGS`]) from a 120 s flight of the nominal
+//! (with identify's defaults, as the shipped sindy_m100, [`SETTINGS`]) from a 120 s flight of the nominal
 //! simulator, diagnosed against the real M100
 //! logs (runs 1–5, run 7 held out). Checks the acceptance of issue 13:
 //!
@@ -20,9 +20,9 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 
 /// The identification settings of the base model and of R: those of the shipped sindy_m100
-/// (scripts/identify_m100.sh): identify's defaults (input delays estimated, stale rows
-/// interpolated, BIC, the ridge ladder) with the sweep 16 … 64.
-const SETTINGS: [&str; 2] = ["--sweep-values", "16,20,24,32,40,48,64"];
+/// (scripts/identify_m100.sh): identify's defaults (integral-form targets, input delays
+/// estimated, stale rows interpolated, the default sweep with BIC, the ridge ladder).
+const SETTINGS: [&str; 0] = [];
 
 fn m100() -> Option<PathBuf> {
     let dir = repo().join("../shared/flights/m100");

@@ -3,7 +3,7 @@
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use uavgen::identify::bounded_selection::select_bounded_with;
-use uavgen::identify::dataset::{build, DatasetOptions};
+use uavgen::identify::dataset::{build, DatasetOptions, Targets};
 use uavgen::identify::horizon_check::{self, HorizonCheck};
 use uavgen::identify::pd::{self, PdFitOptions};
 use uavgen::identify::preprocess::{LowPass, SavGol};
@@ -40,6 +40,12 @@ pub enum OptimizerArg {
 pub enum CriterionArg {
     Aic,
     Bic,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TargetsArg {
+    Derivative,
+    Integral,
 }
 
 #[derive(Args)]
@@ -114,6 +120,11 @@ pub struct IdentifyArgs {
     /// differentiating; `keep` uses the log as recorded (docs/logs.md).
     #[arg(long, value_enum, default_value_t = StalePolicy::Interpolate)]
     stale: StalePolicy,
+    /// SINDy: the regression's targets. `derivative`: Savitzky-Golay derivatives at the samples;
+    /// `integral`: the integral form over each sample interval, (x_{k+1} − x_k)/Δt against the
+    /// trapezoid mean of the library, no differentiation (docs/sindy.md, "Targets").
+    #[arg(long, value_enum, default_value_t = TargetsArg::Integral)]
+    targets: TargetsArg,
     /// PD: mass in kg.
     #[arg(long, default_value_t = 2.4)]
     mass: f64,
@@ -215,26 +226,36 @@ fn round_s(v: f64) -> f64 {
 }
 
 /// Estimate the input response from the logs (`--input-delay auto`).
-fn estimate_response(logs: &[uavgen::logs::FlightLog], savgol: SavGol) -> Result<response::ResponseEstimate, String> {
+fn estimate_response(
+    logs: &[uavgen::logs::FlightLog],
+    savgol: SavGol,
+    targets: Targets,
+) -> Result<response::ResponseEstimate, String> {
     let whole = build(
         logs,
         &DatasetOptions {
             savgol,
             trim_edges: false,
+            targets,
             ..DatasetOptions::default()
         },
     )
     .map_err(|e| e.to_string())?;
+    let h = match targets {
+        Targets::SavGol => savgol.half_window(),
+        Targets::Trapezoid => 0,
+    };
     let segments: Vec<ScanSegment> = whole
         .segments
         .into_iter()
         .map(|s| ScanSegment {
             log: s.log,
             dt: s.dt,
-            h: savgol.half_window(),
+            h,
             x: s.x,
             u: s.u,
             dx: s.dx,
+            x_next: s.x_next,
         })
         .collect();
     response::estimate(&segments, &ScanOptions::default()).map_err(|e| e.to_string())
@@ -298,6 +319,10 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             args.logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
         ));
     }
+    let targets = match (&args.method, args.targets) {
+        (Method::Sindy, TargetsArg::Integral) => Targets::Trapezoid,
+        _ => Targets::SavGol,
+    };
     let (response, estimate) = match delay_spec {
         DelaySpec::None => (None, None),
         DelaySpec::List(d) => (
@@ -311,7 +336,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             eprintln!(
                 "estimating input delays and lags (--input-delay auto: delays 0..0.5 s, lags 0.02..0.8 s; held-out one-step error of the driven row, guarded by its loop's held-out free runs) ..."
             );
-            let est = estimate_response(&logs, savgol)?;
+            let est = estimate_response(&logs, savgol, Targets::Trapezoid)?;
             eprintln!(
                 "  held out: {} {}; per channel: delay (Δχ² = 1 range), lag, one-step and loop free-run RMSE before -> after",
                 est.folds, est.fold_kind
@@ -327,6 +352,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         &DatasetOptions {
             savgol,
             response,
+            targets,
             ..DatasetOptions::default()
         },
     )

@@ -291,7 +291,20 @@ pub fn fit_with_progress(
             y[(k, c)] = dx[i];
         }
     }
-    let theta_full = library.matrix(values.iter().map(|v| v.as_slice()));
+    let mut theta_full = library.matrix(values.iter().map(|v| v.as_slice()));
+    if dataset.is_interval_form() {
+        // The integral form: ½[Θ(x_k, ū_k) + Θ(x_{k+1}, ū_k)] (dataset::Targets::Trapezoid).
+        let ends: Vec<Vec<f64>> = dataset
+            .interval_ends()
+            .zip(&values)
+            .map(|(x1, v)| x1.iter().chain(&v[12..]).copied().collect())
+            .collect();
+        if let Some(k) = ends.iter().position(|v| v.iter().any(|a| !a.is_finite())) {
+            return Err(SindyError::NonFinite(k));
+        }
+        let theta_end = library.matrix(ends.iter().map(|v| v.as_slice()));
+        theta_full = (theta_full + theta_end) * 0.5;
+    }
     // Identically zero columns cannot be normalised and carry no information: leave them out.
     let kept: Vec<usize> = (0..library.len())
         .filter(|&j| theta_full.column(j).iter().any(|&v| v != 0.0))
