@@ -365,6 +365,10 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         "savitzky_golay": { "window": savgol.window, "order": savgol.order },
         "stale": args.stale.name(),
         "input_delay": args.input_delay.trim(),
+        "targets": match targets {
+            Targets::SavGol => "derivative",
+            Targets::Trapezoid => "integral",
+        },
     });
     if let Some(est) = &estimate {
         let channels: serde_json::Map<String, serde_json::Value> = est
