@@ -2,12 +2,13 @@
 //! the round that named them and their parameters after backfitting, the others from the last
 //! round), the rounds, and the notes.
 
-use super::candidate::Candidate;
 use super::catalogue::{self, EffectKind};
 use super::data::Prepared;
+use super::problem::State;
 use super::report_json::{self, EffectReport, RoundEntry, RoundReport};
 use super::response_time::ChannelTime;
-use super::select::{Round, State};
+use super::scored::Candidate;
+use super::select::Round;
 use super::DiagnoseOptions;
 
 /// The parameters of a named effect after backfitting, where they differ from its round's.

@@ -15,51 +15,11 @@
 //! named linear parameters; the scanned delays and lags of the fit on all training data).
 
 use super::data::GROUND_CLEARANCE;
-use super::select::{Problem, State};
+use super::problem::{HorizonErrors, Problem, State};
 use super::shrink::{run, wrapped};
 
 /// A run starts at every STRIDE-th held-out sample.
 pub(crate) const STRIDE: usize = 3;
-
-/// Pooled horizon errors of one model on the held-out data.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub(crate) struct HorizonErrors {
-    pub sse: [f64; 12],
-    pub n: usize,
-    pub runs: usize,
-    pub diverged: usize,
-}
-
-impl HorizonErrors {
-    /// R of `after` against `self` (None without samples).
-    pub fn ratio(&self, after: &HorizonErrors) -> Option<f64> {
-        if self.n == 0 || after.n == 0 {
-            return None;
-        }
-        let r: Vec<f64> = (0..12)
-            .filter(|&i| self.sse[i] > 0.0)
-            .map(|i| (after.sse[i] / after.n as f64) / (self.sse[i] / self.n as f64))
-            .collect();
-        (!r.is_empty()).then(|| r.iter().sum::<f64>() / r.len() as f64)
-    }
-
-    /// The rule — not worse on average over the states, and no more diverged runs: why `after`
-    /// fails it (None when it passes).
-    pub fn objection(&self, after: &HorizonErrors) -> Option<String> {
-        if after.diverged > self.diverged {
-            return Some(format!(
-                "{} held-out free runs over the horizon diverge with it ({} without)",
-                after.diverged, self.diverged
-            ));
-        }
-        match self.ratio(after) {
-            Some(r) if r > 1.0 => Some(format!(
-                "it makes the held-out free runs over the horizon worse (mean MSE ratio over the 12 states {r:.3})"
-            )),
-            _ => None,
-        }
-    }
-}
 
 /// The horizon errors of the model `state` describes, on the held-out data of every test fit.
 pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {

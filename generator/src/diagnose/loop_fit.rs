@@ -12,14 +12,14 @@
 //! integrated autocorrelation time of the row's residual); a loop is part of the effect when its
 //! z = max |θ|/σ is above the rule's threshold and its gain is positive.
 
-use super::candidate::{finish, After, Candidate, Install, Params, Scored};
 use super::catalogue::loops::{channel, LoopParams, NLOOPS};
 use super::catalogue::EffectKind;
 use super::data::SegData;
 use super::fit::MAX_LAG;
+use super::problem::{Current, Problem, State};
 use super::residuals::{filter, Base};
 use super::score::{taus, Rules};
-use super::select::{Current, Problem, State};
+use super::scored::{finish, After, Candidate, Install, LoopFit, Params, Scored};
 
 /// A loop is a mismatch only when it differs materially from the base model's: its bandwidth
 /// ratio √gain outside [1/[`MATERIAL_BANDWIDTH`], [`MATERIAL_BANDWIDTH`]] or its coupling changed by
@@ -36,19 +36,6 @@ pub const MATERIAL_COUPLING: f64 = 0.5;
 pub fn material(gain: f64, coupling: f64) -> bool {
     let b = super::catalogue::loops::bandwidth_ratio(gain);
     !(1.0 / MATERIAL_BANDWIDTH..=MATERIAL_BANDWIDTH).contains(&b) || (coupling - 1.0).abs() > MATERIAL_COUPLING
-}
-
-/// A fitted loop, for the report.
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) struct LoopFit {
-    pub l: usize,
-    pub gain: f64,
-    pub gain_sigma: f64,
-    pub coupling: f64,
-    pub coupling_sigma: f64,
-    pub z: f64,
-    pub kept: bool,
-    pub not_kept: Option<String>,
 }
 
 /// The filtered (own, coupling) columns of every loop at a segment's interior samples, under
@@ -288,7 +275,7 @@ pub(crate) fn refit(p: &Problem, state: &mut State) {
     }
     let mut without = state.clone();
     without.transform.loops = [None; NLOOPS];
-    let cur = super::select::current(p, &without);
+    let cur = super::problem::current(p, &without);
     let segs = p.data.variant(state.destale);
     let cols: Vec<_> = segs.iter().map(|s| columns(s, p.base, state)).collect();
     let fin = p.final_fit();

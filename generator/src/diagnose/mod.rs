@@ -32,14 +32,17 @@ mod envelope;
 pub mod fit;
 mod horizon_rule;
 mod inherited;
+mod input_fit;
 mod loop_fit;
 mod plots;
+mod problem;
 mod report_json;
 mod report_md;
 mod residuals;
 mod response_fit;
 pub mod response_time;
 pub mod score;
+mod scored;
 mod select;
 mod shrink;
 mod where_link;
@@ -453,12 +456,112 @@ fn run(
     } else {
         1
     };
+    let data = prepare_data(&base, options, train, holdout, split, progress)?;
+    let (fits, cv) = problem::folds(&data);
+    if cv && fits.len() < 3 {
+        return Err(DiagnoseError::NoData {
+            what: "cross-validation (no held-out logs): at least two parts".into(),
+            rows: options.savgol.window + 2,
+        });
+    }
+    // Held-out samples outside the training envelope are not scored (all are in cross-validation).
+    let (mask, inside) = if cv {
+        (data.raw.iter().map(|s| s.airborne.clone()).collect(), 1.0)
+    } else {
+        envelope::masks(&data.raw)
+    };
+    let (where_input, where_report) = where_analysis(&base, ctx, &data, train, options, progress);
+    let problem = problem::Problem {
+        base: &base,
+        data: &data,
+        fits,
+        cv,
+        ctx,
+        options,
+        input_rows: input_rows(&base),
+        floor: floor(&data),
+        mask,
+        seeds: seeds(where_report.as_ref()),
+    };
+    let (state, rounds) = select::select(
+        &problem,
+        &options.candidates,
+        &options.rules,
+        &mut |done, total, what| progress(Progress { done, total, what }),
+    );
+
+    let response_times = response_time::compare(&problem, &state);
+    // Parameters of the named effects: the final fit; per fold for the cross-validated shrink.
+    let fin = problem.final_fit();
+    let (linear, mut notes) = catalogue::linear::linear_parameters(&state.linear, &state.theta[fin]);
+    let source = options
+        .source
+        .clone()
+        .unwrap_or_else(|| format!("uavgen {} diagnose", env!("CARGO_PKG_VERSION")));
+    let inputs: Vec<String> = INPUT_COLUMNS.iter().map(|s| s.to_string()).collect();
+    let corrections = corrected::corrections(&state, &linear, &inputs, options.rotor_radius, source);
+    let (shrink, reference) = shrink_figures(&problem, &state, reference, progress)?;
+
+    let effects = assemble::effects(&rounds, &state, &linear, options.rotor_radius);
+    let rounds_report = assemble::rounds(&rounds);
+    notes.extend(inherited::note(&base.own, &model.inputs));
+    notes.extend(assemble::notes(&data, &state, options));
+    let response_named = [
+        EffectKind::Latency,
+        EffectKind::ActuatorLag,
+        EffectKind::ChannelResponse,
+        EffectKind::LoopMismatch,
+    ];
+    if state.named.iter().any(|k| response_named.contains(k)) {
+        notes.extend(assemble::xcorr_note(where_report.as_ref(), &response_times));
+    }
+    let corrected = corrected_json(model, options, &corrections, &mut notes)?;
+    let verdict: Vec<String> = if state.named.is_empty() {
+        vec!["none".to_string()]
+    } else {
+        state.named.iter().map(|k| k.name().to_string()).collect()
+    };
+
+    Ok(Diagnosis {
+        model: ModelSummary {
+            name: model.name.clone(),
+            kind: model.kind_name().to_string(),
+            file: model.source.file.clone(),
+            sha256: model.source.sha256.clone(),
+            gravity: base.gravity,
+        },
+        logs: summaries(train, &data.raw, false),
+        holdout: holdout_summary(&problem, train, holdout, split, inside),
+        effects,
+        verdict,
+        shrink,
+        reference,
+        where_report,
+        rounds: rounds_report,
+        corrections,
+        corrected,
+        notes,
+        response_times,
+        options: options.clone(),
+        where_input,
+    })
+}
+
+/// The prepared training (and held-out) data; an error when either has no usable segment.
+fn prepare_data(
+    base: &residuals::Base,
+    options: &DiagnoseOptions,
+    train: &[FlightLog],
+    holdout: &[FlightLog],
+    split: usize,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<data::Prepared, DiagnoseError> {
     progress(Progress {
         done: 0,
         total: 0,
         what: "preparing the data",
     });
-    let data = data::prepare(&base, &options.savgol, options.residual, train, holdout, split)?;
+    let data = data::prepare(base, &options.savgol, options.residual, train, holdout, split)?;
     let rows = options.savgol.window + 2;
     if !data.raw.iter().any(|s| !s.holdout) {
         return Err(DiagnoseError::NoData {
@@ -472,79 +575,54 @@ fn run(
             rows,
         });
     }
-    let (fits, cv) = select::folds(&data);
-    if cv && fits.len() < 3 {
-        return Err(DiagnoseError::NoData {
-            what: "cross-validation (no held-out logs): at least two parts".into(),
-            rows,
-        });
-    }
-    let (input_rows, floor) = (input_rows(&base), floor(&data));
-    // Held-out samples outside the training envelope are not scored (all are in cross-validation).
-    let (mask, inside) = if cv {
-        (data.raw.iter().map(|s| s.airborne.clone()).collect(), 1.0)
-    } else {
-        envelope::masks(&data.raw)
-    };
-    // Where: the base model's residuals on the training logs.
-    let where_input = options.where_analysis.then(|| {
+    Ok(data)
+}
+
+/// Where: the base model's residuals on the training logs (when asked for), and their report.
+fn where_analysis(
+    base: &residuals::Base,
+    ctx: Context,
+    data: &data::Prepared,
+    train: &[FlightLog],
+    options: &DiagnoseOptions,
+    progress: &mut dyn FnMut(Progress),
+) -> (Option<WhereInput>, Option<WhereReport>) {
+    let input = options.where_analysis.then(|| {
         progress(Progress {
             done: 0,
             total: 0,
             what: "where: residual analysis",
         });
         let segs: Vec<&data::SegData> = data.raw.iter().filter(|s| !s.holdout).collect();
-        where_link::where_input(&Augmented::plain(&base, ctx), &segs, options.horizon, train)
+        where_link::where_input(&Augmented::plain(base, ctx), &segs, options.horizon, train)
     });
-    let where_report = where_input
+    let report = input
         .as_ref()
         .map(|input| where_link::where_report(input, options.horizon));
+    (input, report)
+}
 
-    let seeds = seeds(where_report.as_ref());
-    let problem = select::Problem {
-        base: &base,
-        data: &data,
-        fits,
-        cv,
-        ctx,
-        options,
-        input_rows,
-        floor,
-        mask,
-        seeds,
-    };
-    let (state, rounds) = select::select(
-        &problem,
-        &options.candidates,
-        &options.rules,
-        &mut |done, total, what| progress(Progress { done, total, what }),
-    );
-
-    let response_times = response_time::compare(&problem, &state);
-    // Parameters of the named effects: the final fit; per fold for the cross-validated shrink.
-    let fin = problem.final_fit();
-    let (linear, mut notes) = corrected::linear_parameters(&state, &state.theta[fin]);
-    let source = options
-        .source
-        .clone()
-        .unwrap_or_else(|| format!("uavgen {} diagnose", env!("CARGO_PKG_VERSION")));
-    let inputs: Vec<String> = INPUT_COLUMNS.iter().map(|s| s.to_string()).collect();
-    let corrections = corrected::corrections(&state, &linear, &inputs, options.rotor_radius, source);
-
-    // Shrink on the held-out data of every test fit.
+/// How far the gap shrinks on the held-out data of every test fit, and the same on the
+/// noise-free copies of the held-out logs (same stretches, same parameters) when given.
+fn shrink_figures(
+    problem: &problem::Problem,
+    state: &problem::State,
+    reference: &[FlightLog],
+    progress: &mut dyn FnMut(Progress),
+) -> Result<(Shrink, Option<ReferenceShrink>), DiagnoseError> {
+    let (data, options) = (problem.data, problem.options);
     progress(Progress {
         done: 0,
         total: 0,
         what: "shrink: free runs before and after",
     });
-    let (before, after) = shrink::pools(&problem, &state, false, |s, destaled| Some(&data.variant(destaled)[s]));
-    // The same on the noise-free copies of the held-out logs (same stretches, same parameters).
+    let (before, after) = shrink::pools(problem, state, false, |s, destaled| Some(&data.variant(destaled)[s]));
     let reference = if reference.is_empty() {
         None
     } else {
-        let refdata = data::prepare(&base, &options.savgol, options.residual, &[], reference, 1)?;
+        let refdata = data::prepare(problem.base, &options.savgol, options.residual, &[], reference, 1)?;
         let key = |s: &data::SegData| (s.log, s.segment, s.part);
-        let (before, after) = shrink::pools(&problem, &state, true, |s, destaled| {
+        let (before, after) = shrink::pools(problem, state, true, |s, destaled| {
             let r = refdata.raw.iter().position(|d| key(d) == key(&data.raw[s]))?;
             Some(&refdata.variant(destaled)[r])
         });
@@ -554,13 +632,8 @@ fn run(
             after: after.side(),
         })
     };
-    let verdict: Vec<String> = if state.named.is_empty() {
-        vec!["none".to_string()]
-    } else {
-        state.named.iter().map(|k| k.name().to_string()).collect()
-    };
     let shrink = Shrink::new(
-        if cv {
+        if problem.cv {
             format!(
                 "cross-validation: each of {} folds' held-out segments, parameters fitted on the others",
                 problem.fits.len() - 1
@@ -580,27 +653,49 @@ fn run(
             runs: Vec::new(),
         },
     );
+    Ok((shrink, reference))
+}
 
-    let effects = assemble::effects(&rounds, &state, &linear, options.rotor_radius);
-    let rounds_report = assemble::rounds(&rounds);
-    notes.extend(inherited::note(&base.own, &model.inputs));
-    notes.extend(assemble::notes(&data, &state, options));
-    let response_named = [
-        EffectKind::Latency,
-        EffectKind::ActuatorLag,
-        EffectKind::ChannelResponse,
-        EffectKind::LoopMismatch,
-    ];
-    if state.named.iter().any(|k| response_named.contains(k)) {
-        notes.extend(assemble::xcorr_note(where_report.as_ref(), &response_times));
+/// Which held-out data scored the candidates.
+fn holdout_summary(
+    problem: &problem::Problem,
+    train: &[FlightLog],
+    holdout: &[FlightLog],
+    split: usize,
+    inside: f64,
+) -> Holdout {
+    let cv = problem.cv;
+    Holdout {
+        mode: if cv { "cross-validation" } else { "logs" }.to_string(),
+        logs: summaries(holdout, &problem.data.raw, true),
+        folds: if cv { problem.fits.len() - 1 } else { 1 },
+        description: if !cv {
+            "fitted on the training logs, scored on the held-out logs".to_string()
+        } else if train.len() >= 2 {
+            "leave one training log out".to_string()
+        } else if split > 1 {
+            format!("the lone training segment cut into {split} consecutive parts, leave one part out")
+        } else {
+            "leave one training segment out".to_string()
+        },
+        scored_fraction: inside,
     }
-    // corrected.json (null when the model text is not at hand: see `Diagnosis::corrected_from`).
+}
+
+/// corrected.json: the model file with the corrections block (null, with a note, when the model
+/// text is not at hand: see `Diagnosis::corrected_from`).
+fn corrected_json(
+    model: &Model,
+    options: &DiagnoseOptions,
+    corrections: &Corrections,
+    notes: &mut Vec<String>,
+) -> Result<serde_json::Value, DiagnoseError> {
     let text = options
         .model_text
         .clone()
         .or_else(|| std::fs::read_to_string(&model.source.file).ok());
-    let corrected = match &text {
-        Some(t) => corrected_value(t, &model.source.file, &corrections)?,
+    Ok(match &text {
+        Some(t) => corrected_value(t, &model.source.file, corrections)?,
         None => {
             notes.push(format!(
                 "corrected.json needs the model file's text ({} not found from here): pass \
@@ -609,43 +704,5 @@ fn run(
             ));
             serde_json::Value::Null
         }
-    };
-
-    Ok(Diagnosis {
-        model: ModelSummary {
-            name: model.name.clone(),
-            kind: model.kind_name().to_string(),
-            file: model.source.file.clone(),
-            sha256: model.source.sha256.clone(),
-            gravity: base.gravity,
-        },
-        logs: summaries(train, &data.raw, false),
-        holdout: Holdout {
-            mode: if cv { "cross-validation" } else { "logs" }.to_string(),
-            logs: summaries(holdout, &data.raw, true),
-            folds: if cv { problem.fits.len() - 1 } else { 1 },
-            description: if !cv {
-                "fitted on the training logs, scored on the held-out logs".to_string()
-            } else if train.len() >= 2 {
-                "leave one training log out".to_string()
-            } else if split > 1 {
-                format!("the lone training segment cut into {split} consecutive parts, leave one part out")
-            } else {
-                "leave one training segment out".to_string()
-            },
-            scored_fraction: inside,
-        },
-        effects,
-        verdict,
-        shrink,
-        reference,
-        where_report,
-        rounds: rounds_report,
-        corrections,
-        corrected,
-        notes,
-        response_times,
-        options: options.clone(),
-        where_input,
     })
 }

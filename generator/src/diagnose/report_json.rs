@@ -1,11 +1,11 @@
 //! The JSON shapes of report.json (every field is documented in docs/diagnose.md).
 
-use super::candidate::{Candidate, Params};
 use super::catalogue::inputs::lag_channel_name;
 use super::catalogue::linear::parameter_names;
 use super::catalogue::loops;
 use super::catalogue::{EffectKind, CHANNELS};
-use super::response_fit::ChannelFit as ResponseFit;
+use super::scored::ChannelFit as ResponseFit;
+use super::scored::{Candidate, Params};
 use serde::Serialize;
 use serde_json::{json, Value};
 use std::collections::BTreeMap;

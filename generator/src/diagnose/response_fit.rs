@@ -17,44 +17,20 @@
 //! costs it two parameters more per channel (ΔBIC), so the simpler effect wins where it explains
 //! as much.
 
-use super::candidate::{finish, under, Candidate, Install, Params, Scored};
 use super::catalogue::inputs::InputTransform;
 use super::catalogue::EffectKind;
 use super::fit::{profile_sigma, MAX_LAG};
 use super::horizon_rule::horizon_errors;
+use super::problem::{Current, Problem, State};
 use super::residuals::filter;
 use super::score::{lr_z, sums_masked, taus, Rules, Sums};
-use super::select::{Current, Problem, State};
+use super::scored::{finish, under, Candidate, ChannelFit, Install, Params, Scored};
 
 /// The longest delay scanned is at least this, s.
 pub const MIN_SCAN_DELAY: f64 = 0.4;
 
 /// The time constants scanned besides 0 (no lag), s.
 pub const LAGS: [f64; 8] = [0.02, 0.04, 0.07, 0.1, 0.15, 0.2, 0.3, 0.5];
-
-/// A fitted channel, for the report.
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) struct ChannelFit {
-    pub input: usize,
-    pub delay: f64,
-    pub delay_sigma: Option<f64>,
-    pub lag: f64,
-    pub lag_sigma: Option<f64>,
-    pub gain: f64,
-    pub gain_sigma: f64,
-    /// The delay the residual cross-correlation suggested (the scan's seed), s.
-    pub seed: Option<f64>,
-    pub z: f64,
-    pub kept: bool,
-    pub not_kept: Option<String>,
-}
-
-impl ChannelFit {
-    /// d + τ: the response time the channel adds, s.
-    pub fn added_time(&self) -> f64 {
-        self.delay + self.lag
-    }
-}
 
 fn with(tr: &InputTransform, j: usize, d: f64, tau: f64, gain: Option<f64>) -> InputTransform {
     let mut t = *tr;

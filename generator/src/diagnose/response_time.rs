@@ -15,7 +15,7 @@
 
 use super::augmented::{Augmented, Lags};
 use super::catalogue::inputs::delayed;
-use super::select::{Problem, State};
+use super::problem::{Problem, State};
 use serde::Serialize;
 
 /// Driven state per input (u_vz → vz, u_roll → roll, u_pitch → pitch, u_yaw_rate → yaw_rate).

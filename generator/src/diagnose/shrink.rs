@@ -6,8 +6,8 @@
 use super::augmented::Augmented;
 use super::catalogue::CHANNELS;
 use super::data::{SegData, GROUND_CLEARANCE};
+use super::problem::{Problem, State};
 use super::residuals::{filter, ResidualKind};
-use super::select::{Problem, State};
 use crate::evaluate::{wrap_angle, DIVERGENCE_BOUND};
 use crate::logs::{STATE_COLUMNS, YAW};
 use crate::metrics::{compare, Metrics};

@@ -115,6 +115,50 @@ pub fn delta(kind: EffectKind, theta: &[f64], s: &Sample, ctx: &Context) -> [f64
     d
 }
 
+/// θ of a linear effect made valid for the model format; notes for clamped values.
+pub(crate) fn clamp(kind: EffectKind, theta: &[f64]) -> (Vec<f64>, Vec<String>) {
+    let mut out = theta.to_vec();
+    let mut notes = Vec::new();
+    let names = parameter_names(kind);
+    let mut floor = |i: usize, lo: f64, strict: bool| {
+        if out[i] < lo || (strict && out[i] <= lo) || !out[i].is_finite() {
+            let to = if strict { lo + 0.01 } else { lo };
+            notes.push(format!(
+                "{kind}.{} fitted {:.4}, written as {to} (the model format requires {} {lo})",
+                names[i],
+                out[i],
+                if strict { ">" } else { "≥" }
+            ));
+            out[i] = to;
+        }
+    };
+    match kind {
+        EffectKind::LinearDrag | EffectKind::QuadraticDrag => {
+            floor(0, 0.0, false);
+            floor(1, 0.0, false);
+        }
+        EffectKind::GroundEffect => floor(0, 0.0, false),
+        EffectKind::ThrustGain => floor(0, -1.0, true),
+        _ => {}
+    }
+    (out, notes)
+}
+
+/// The named linear effects with their (clamped) parameters from the concatenated θ.
+pub(crate) fn linear_parameters(kinds: &[EffectKind], theta: &[f64]) -> (Vec<(EffectKind, Vec<f64>)>, Vec<String>) {
+    let mut at = 0;
+    let mut out = Vec::new();
+    let mut notes = Vec::new();
+    for &kind in kinds {
+        let p = columns(kind);
+        let (v, n) = clamp(kind, &theta[at..at + p]);
+        at += p;
+        out.push((kind, v));
+        notes.extend(n);
+    }
+    (out, notes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
