@@ -183,3 +183,47 @@ fn the_generated_crate_carries_the_declared_envelope() {
     let readme = fs::read_to_string(out.join("README.md")).unwrap();
     assert!(readme.contains("the model file's envelope on vz"), "{readme}");
 }
+
+#[test]
+fn evaluate_notes_a_log_that_leaves_the_envelope() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = tmp.path().join("flight.csv");
+    let o = uavgen(&[
+        "simulate",
+        "--plant",
+        "plants/nominal.json",
+        "--profile",
+        "excite",
+        "--duration",
+        "20",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut model: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(repo().join("models/pd_hover.json")).unwrap()).unwrap();
+    let evaluate = |model: &serde_json::Value| {
+        let path = tmp.path().join("m.json");
+        fs::write(&path, serde_json::to_string_pretty(model).unwrap()).unwrap();
+        let o = uavgen(&[
+            "evaluate",
+            "--model",
+            path.to_str().unwrap(),
+            "--log",
+            log.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        stderr(&o)
+    };
+    // Without an envelope, or with one the flight stays in: no note.
+    assert!(!evaluate(&model).contains("outside the model's envelope"));
+    model["envelope"] = serde_json::json!({"vx": [-100, 100], "roll": [-1.5, 1.5]});
+    assert!(!evaluate(&model).contains("outside the model's envelope"));
+    // An excitation flight leaves a ±1 cm/s envelope on vx; roll stays inside.
+    model["envelope"] = serde_json::json!({"vx": [-0.01, 0.01], "roll": [-1.5, 1.5]});
+    let err = evaluate(&model);
+    assert!(
+        err.contains("flight.csv: ") && err.contains("rows outside the model's envelope (vx)"),
+        "{err}"
+    );
+}
