@@ -14,7 +14,9 @@ use uavgen::model::pysindy::{import, ImportOptions, KinematicRows};
     name = "uavgen",
     version,
     about = "Generate no_std MPC crates for UAV models",
-    args_conflicts_with_subcommands = true
+    args_conflicts_with_subcommands = true,
+    // `--horizon -1` is a bad value of --horizon (named in the message), not an unknown flag `-1`.
+    allow_negative_numbers = true
 )]
 struct Cli {
     /// No progress bars or spinners on stderr (they are only drawn when stderr is a terminal
@@ -30,24 +32,34 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Convert a PySINDy export (scripts/export_pysindy.py) to a uavgen-model/1 file.
+    #[command(allow_negative_numbers = true)]
     ImportPysindy(ImportArgs),
     /// Validate a model file and print its summary (sizes, sparsity, substeps): runs exactly what generation runs, in memory, and writes nothing.
+    #[command(allow_negative_numbers = true)]
     Check(CheckArgs),
     /// Worst-case benchmark of a generated crate (see docs/benchmarks.md).
+    #[command(allow_negative_numbers = true)]
     Bench(BenchArgs),
     /// Identify a SINDy or PD model from flight logs (docs/identification.md).
+    #[command(allow_negative_numbers = true)]
     Identify(cli::identify::IdentifyArgs),
     /// Evaluate a model's predictions against flight logs: one-step, horizon and whole-flight metrics.
+    #[command(allow_negative_numbers = true)]
     Evaluate(cli::evaluate::EvaluateArgs),
     /// Simulate a flight with a plant file (vehicle, autopilot, effects) and write a flight log (docs/simulate.md).
+    #[command(allow_negative_numbers = true)]
     Simulate(cli::simulate::SimulateArgs),
     /// Closed-loop MPC on the plant simulator along one of the paper's trajectories (docs/track.md).
+    #[command(allow_negative_numbers = true)]
     Track(cli::track::TrackArgs),
     /// Import a PX4 ULog, MCAP (ROS 2), ROS 1 bag or ArduPilot DataFlash recording as a flight log CSV, mapped by a profile (docs/import.md).
+    #[command(allow_negative_numbers = true)]
     Import(cli::import::ImportArgs),
     /// Diagnose a model on flight logs: where it parts from the data, which effect explains it, the corrected model (docs/diagnose.md).
+    #[command(allow_negative_numbers = true)]
     Diagnose(cli::diagnose::DiagnoseArgs),
     /// The operating envelope of flight logs (observed range per state, widened), printed or written into a model file as identify does (docs/model-format.md#envelope).
+    #[command(allow_negative_numbers = true)]
     Envelope(cli::envelope::EnvelopeArgs),
 }
 

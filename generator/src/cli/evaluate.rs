@@ -45,6 +45,12 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
     if let Some(dir) = args.plots.as_ref().filter(|d| d.exists() && !d.is_dir()) {
         return Err(format!("--plots {}: exists and is not a directory", dir.display()));
     }
+    if args.horizon == 0 {
+        return Err("--horizon: must be at least 1 sample, got 0".into());
+    }
+    if args.substeps == Some(0) {
+        return Err("--substeps: must be at least 1, got 0".into());
+    }
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
     let mut logs = Vec::new();
     for path in &args.logs {

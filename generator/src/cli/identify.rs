@@ -241,6 +241,13 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     let savgol = SavGol::new(args.savgol_window, args.savgol_order)
         .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
     let delay_spec = parse_delay_spec(&args.input_delay)?;
+    // Every value is checked before any work (the PD options too, which are used last).
+    if matches!(args.method, Method::Pd) {
+        check_positive("mass", args.mass)?;
+        if let Some(lambda) = args.lowpass {
+            check_positive("lowpass", lambda)?;
+        }
+    }
     if let Some(t) = args.threshold {
         if !(t.is_finite() && t >= 0.0) {
             return Err(format!("--threshold: must be a finite number >= 0, got {t}"));
