@@ -88,7 +88,11 @@ macro_rules! comparisons {
                     let mut mpc = Mpc::new();
                     assert!(mpc.set_guess(&xs, &us));
                     let s = mpc.solve(&x0, &reference);
-                    assert!(matches!(s.status, Status::Solved), "instance {instance}: {:?}", s.status);
+                    // A random x₀ may leave a declared envelope (sindy_m100, pd_m100: the M100
+                    // logs' vz within -1.7..1.8 m/s); the step is taken all the same.
+                    let inside = (0..NX).all(|i| x0[i] >= $krate::ENVELOPE_LO[i] && x0[i] <= $krate::ENVELOPE_HI[i]);
+                    let expected = if inside { Status::Solved } else { Status::OutOfEnvelope };
+                    assert_eq!(s.status, expected, "instance {instance}");
                     reference_solver.set_guess(xs.iter().map(|x| x.to_vec()).collect(), us.iter().map(|u| u.to_vec()).collect());
                     let r: Vec<Vec<f64>> = reference.iter().map(|x| x.to_vec()).collect();
                     let g = reference_solver.rti_step(&x0, &r).unwrap_or_else(|e| panic!("instance {instance}: {e}"));
@@ -267,6 +271,76 @@ macro_rules! comparisons {
         }
     };
 }
+
+/// A crate generated from a model file with an `envelope` carries it as ENVELOPE_LO/HI (the
+/// generic bounds elsewhere) and flags x₀ and references just beyond it, not those just inside.
+macro_rules! declared_envelope {
+    ($name:ident, $krate:ident, $model:literal) => {
+        #[test]
+        fn $name() {
+            use $krate::{Mpc, Status, ENVELOPE_HI, ENVELOPE_LO, N, NX};
+            let model = shipped_model($model);
+            let declared = model
+                .envelope
+                .clone()
+                .expect("the shipped model declares an envelope");
+            let generic = uavgen::discretize::Envelope::default().plausibility_bounds(&model.states);
+            for i in 0..NX {
+                let (lo, hi) = declared
+                    .get(&model.states[i])
+                    .unwrap_or((-generic[i], generic[i]));
+                assert_eq!((ENVELOPE_LO[i], ENVELOPE_HI[i]), (lo, hi), "{}", model.states[i]);
+            }
+            let hover = {
+                let mut x = [0.0; NX];
+                x[..3].copy_from_slice(&[3.0, 3.0, 5.0]);
+                x
+            };
+            let mut r = [[0.0; NX]; N + 1];
+            for row in r.iter_mut() {
+                row[..3].copy_from_slice(&[3.0, 3.0, 5.0]);
+            }
+            let status = |x0: &[f64; NX], r: &[[f64; NX]; N + 1]| {
+                let mut mpc = Mpc::new();
+                mpc.initialize(&hover, &[0.0; $krate::NU]);
+                let s = mpc.solve(x0, r);
+                for i in 0..$krate::NU {
+                    assert!(s.u0[i].is_finite() && s.u0[i] >= $krate::U_MIN[i] && s.u0[i] <= $krate::U_MAX[i]);
+                }
+                s.status
+            };
+            assert_eq!(status(&hover, &r), Status::Solved);
+            for (state, lo, hi) in &declared.bounds {
+                let i = model.states.iter().position(|s| s == state).unwrap();
+                // 1 % of the range beyond either end: flagged; 1 % inside both ends: solved.
+                let step = 0.01 * (hi - lo);
+                for (v, expected) in [
+                    (hi + step, Status::OutOfEnvelope),
+                    (lo - step, Status::OutOfEnvelope),
+                    (hi - step, Status::Solved),
+                    (lo + step, Status::Solved),
+                ] {
+                    let mut x0 = hover;
+                    x0[i] = v;
+                    assert_eq!(status(&x0, &r), expected, "x0 {state} = {v}");
+                }
+                // A reference row beyond the envelope is flagged too.
+                let mut far = r;
+                far[N][i] = hi + step;
+                assert_eq!(
+                    status(&hover, &far),
+                    Status::OutOfEnvelope,
+                    "reference {state} = {}",
+                    hi + step
+                );
+            }
+        }
+    };
+}
+
+declared_envelope!(sindy_m100_declared_envelope, sindy_m100, "sindy_m100");
+declared_envelope!(pd_m100_declared_envelope, pd_m100, "pd_m100");
+declared_envelope!(sindy_m100_riccati_declared_envelope, sindy_m100_riccati, "sindy_m100");
 
 comparisons!(sindy, sindy_m100, "sindy_m100", hovers: true);
 comparisons!(pd_hover_model, pd_hover, "pd_hover", hovers: true);

@@ -14,9 +14,15 @@ use uavgen::model::pysindy::{import, ImportOptions, KinematicRows};
     name = "uavgen",
     version,
     about = "Generate no_std MPC crates for UAV models",
-    args_conflicts_with_subcommands = true
+    args_conflicts_with_subcommands = true,
+    // `--horizon -1` is a bad value of --horizon (named in the message), not an unknown flag `-1`.
+    allow_negative_numbers = true
 )]
 struct Cli {
+    /// No progress bars or spinners on stderr (they are only drawn when stderr is a terminal
+    /// anyway); results, warnings and errors are printed as always.
+    #[arg(long, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Option<Command>,
     #[command(flatten)]
@@ -26,23 +32,35 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Convert a PySINDy export (scripts/export_pysindy.py) to a uavgen-model/1 file.
+    #[command(allow_negative_numbers = true)]
     ImportPysindy(ImportArgs),
     /// Validate a model file and print its summary (sizes, sparsity, substeps): runs exactly what generation runs, in memory, and writes nothing.
+    #[command(allow_negative_numbers = true)]
     Check(CheckArgs),
     /// Worst-case benchmark of a generated crate (see docs/benchmarks.md).
+    #[command(allow_negative_numbers = true)]
     Bench(BenchArgs),
     /// Identify a SINDy or PD model from flight logs (docs/identification.md).
+    #[command(allow_negative_numbers = true)]
     Identify(cli::identify::IdentifyArgs),
     /// Evaluate a model's predictions against flight logs: one-step, horizon and whole-flight metrics.
+    #[command(allow_negative_numbers = true)]
     Evaluate(cli::evaluate::EvaluateArgs),
     /// Simulate a flight with a plant file (vehicle, autopilot, effects) and write a flight log (docs/simulate.md).
+    #[command(allow_negative_numbers = true)]
     Simulate(cli::simulate::SimulateArgs),
     /// Closed-loop MPC on the plant simulator along one of the paper's trajectories (docs/track.md).
+    #[command(allow_negative_numbers = true)]
     Track(cli::track::TrackArgs),
     /// Import a PX4 ULog, MCAP (ROS 2), ROS 1 bag or ArduPilot DataFlash recording as a flight log CSV, mapped by a profile (docs/import.md).
+    #[command(allow_negative_numbers = true)]
     Import(cli::import::ImportArgs),
     /// Diagnose a model on flight logs: where it parts from the data, which effect explains it, the corrected model (docs/diagnose.md).
+    #[command(allow_negative_numbers = true)]
     Diagnose(cli::diagnose::DiagnoseArgs),
+    /// The operating envelope of flight logs (observed range per state, widened), printed or written into a model file as identify does (docs/model-format.md#envelope).
+    #[command(allow_negative_numbers = true)]
+    Envelope(cli::envelope::EnvelopeArgs),
 }
 
 #[derive(Args)]
@@ -204,6 +222,7 @@ fn default_sigpipe() {}
 fn main() -> ExitCode {
     default_sigpipe();
     let cli = Cli::parse();
+    cli::progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Some(Command::ImportPysindy(args)) => import_pysindy(args),
         Some(Command::Check(args)) => check(args),
@@ -218,6 +237,7 @@ fn main() -> ExitCode {
         },
         Some(Command::Diagnose(args)) => cli::diagnose::run(args),
         Some(Command::Import(args)) => cli::import::run(args),
+        Some(Command::Envelope(args)) => cli::envelope::run(args),
         None => generate(cli.generate),
     };
     match result {
@@ -262,7 +282,10 @@ fn generate(args: GenerateArgs) -> Result<(), String> {
     let out = args.out.unwrap_or_else(|| PathBuf::from(&name));
     // Refuse early, before the (possibly slow) substep scan.
     uavgen::codegen::write::check_target(&out).map_err(|e| e.to_string())?;
-    let generated = uavgen::generate(&model, &options).map_err(|e| format!("{}: {e}", path.display()))?;
+    let generated = cli::progress::with_spinner("generating (substep rule, Jacobians, code)", || {
+        uavgen::generate(&model, &options)
+    })
+    .map_err(|e| format!("{}: {e}", path.display()))?;
     write_all_with(&out, &generated.files, args.force).map_err(|e| e.to_string())?;
     let how = match &generated.substep_choice {
         Some(c) => format!(
@@ -356,7 +379,10 @@ fn check(args: CheckArgs) -> Result<(), String> {
         model.nx() * (model.nx() + model.nu())
     );
     // Exactly what `uavgen --model` runs, in memory: whatever generation would refuse, check refuses.
-    let generated = uavgen::generate(&model, &options).map_err(|e| format!("{}: {e}", args.model.display()))?;
+    let generated = cli::progress::with_spinner("generating in memory (substep rule, Jacobians, code)", || {
+        uavgen::generate(&model, &options)
+    })
+    .map_err(|e| format!("{}: {e}", args.model.display()))?;
     match &generated.substep_choice {
         Some(c) => println!(
             "  RK4 at {} Hz: {} substeps (stiffest eigenvalue {:.2}{:+.2}i 1/s over {} envelope points)",
@@ -397,9 +423,10 @@ fn bench(args: BenchArgs) -> Result<(), String> {
         None => None,
     };
     eprintln!("building the harness for {} ...", args.crate_dir.display());
-    let (name, binary) = build_harness(&args.crate_dir, &options)?;
+    let (name, binary) =
+        cli::progress::with_spinner("building the harness", || build_harness(&args.crate_dir, &options))?;
     eprintln!("running {} RTI steps on each of 3 trajectories ...", options.steps);
-    let timing = run_harness(&binary, &name, &options)?;
+    let timing = cli::progress::with_spinner("timing RTI steps", || run_harness(&binary, &name, &options))?;
     let us = |ns: f64| ns / 1000.0;
     println!(
         "{name}: {} RTI steps (N = {}, {} substeps), pinned to one core: {}",
@@ -428,7 +455,7 @@ fn bench(args: BenchArgs) -> Result<(), String> {
             "counting instructions of {} steps on each of 3 trajectories under callgrind ...",
             options.instruction_steps
         );
-        let c = count_instructions(&binary, &options)?;
+        let c = cli::progress::with_spinner("callgrind", || count_instructions(&binary, &options))?;
         let trajectory = ["sinusoidal", "circular", "spiral"][c.max_at.0.min(2)];
         println!(
             "  instructions per RTI step (callgrind, {} steps of the scenario): median {}, max {} ({} trajectory, step {})",
@@ -443,8 +470,13 @@ fn bench(args: BenchArgs) -> Result<(), String> {
             "counting instructions of the adversarial search ({} trials × {ADVERSARIAL_STEPS} steps) under callgrind ...",
             options.adversarial_trials
         );
-        let mut c = count_adversarial(&binary, &options)?;
-        let outcome = adversarial_outcome(&binary, &options)?;
+        let (c, outcome) = cli::progress::with_spinner("callgrind: adversarial search", || {
+            Ok::<_, String>((
+                count_adversarial(&binary, &options)?,
+                adversarial_outcome(&binary, &options)?,
+            ))
+        })?;
+        let mut c = c;
         println!(
             "  adversarial search (callgrind, {} steps): median {}, max {} (trial {}, step {}); {outcome}",
             c.steps, c.median, c.max, c.max_at.0, c.max_at.1
@@ -458,7 +490,9 @@ fn bench(args: BenchArgs) -> Result<(), String> {
         match (&model, options.generic_steps) {
             (Some(m), n) if n > 0 => {
                 eprintln!("timing the generic reference solver ({n} steps per trajectory) ...");
-                let g = run_generic(m, &dims.options, dims.horizon, dims.dt, dims.substeps, n, options.seed);
+                let g = cli::progress::with_spinner("generic reference solver", || {
+                    run_generic(m, &dims.options, dims.horizon, dims.dt, dims.substeps, n, options.seed)
+                });
                 println!(
                 "  generic (interpreted + clarabel): {} steps, total median {:.1} p99 {:.1} max {:.1} µs, {} failures",
                 g.steps, us(g.total_ns[0]), us(g.total_ns[1]), us(g.total_ns[2]), g.failures

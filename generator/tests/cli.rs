@@ -513,6 +513,12 @@ fn identify_and_evaluate_from_logs() {
         assert!(stderr(&o).contains("stayed bounded"), "{method}: {}", stderr(&o));
         let model = uavgen::load(&out).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(model.nx(), 12);
+        // The operating envelope of the training log (docs/model-format.md#envelope).
+        let flight = uavgen::logs::load_any(&log, None).unwrap();
+        let expected = uavgen::model::envelope::from_logs(&[&flight]).unwrap();
+        assert_eq!(model.envelope.as_ref(), Some(&expected), "{method}");
+        let vz = expected.get("vz").unwrap();
+        assert!(vz.0 < -0.5 && vz.1 > 0.5, "{vz:?}");
         let o = uavgen(&[
             "evaluate",
             "--model",

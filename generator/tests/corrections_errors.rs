@@ -120,7 +120,10 @@ fn schema_errors_carry_the_path_under_corrections() {
     bad["corections"] = json!({});
     let e = parse(&bad.to_string(), "bad.json").unwrap_err();
     assert_eq!(e.kind, ModelErrorKind::UnknownField);
-    assert!(e.to_string().ends_with("`coefficients`, `corrections`"), "{e}");
+    assert!(
+        e.to_string().ends_with("`coefficients`, `corrections`, `envelope`"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -16,7 +16,7 @@ pub enum Status {
     InvalidInput,
     /// A non-finite value appeared; the previous plan is kept.
     NumericalFailure,
-    /// x₀ or the reference lies outside the generated crate's `ENVELOPE`: the input is finite and
+    /// x₀ or the reference lies outside the generated crate's `ENVELOPE_LO`..`ENVELOPE_HI`: the input is finite and
     /// within bounds but extrapolates the model far beyond its data.
     OutOfEnvelope,
 }

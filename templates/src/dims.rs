@@ -39,9 +39,13 @@ pub const MAX_IPM_ITERATIONS: usize = 30;
 /// generator's envelope on roll, pitch and the body rates. A guess that leaves it is replaced by
 /// the rollout of its inputs in `prepare` (docs/mpc.md).
 pub const TRUST_BOUND: [Real; NX] = [2.0, Real::INFINITY];
-/// Plausibility envelope of x₀ and the reference, |xᵢ| ≤ ENVELOPE[i] (`Real::INFINITY`: none):
-/// far outside the states the model was identified and checked on (docs/mpc.md, "Plausibility").
-/// A solve from beyond it reports `Status::OutOfEnvelope` instead of `Solved`.
-pub const ENVELOPE: [Real; NX] = [1.0e4, Real::INFINITY];
+/// Plausibility envelope of x₀ and the reference, ENVELOPE_LO[i] ≤ xᵢ ≤ ENVELOPE_HI[i]
+/// (`Real::NEG_INFINITY`, `Real::INFINITY`: none): the model file's `envelope` (the operating
+/// envelope it was identified on, widened) where it declares one, else generic bounds far outside
+/// the states the model was checked on (docs/mpc.md, "Plausibility"). A solve from beyond it
+/// reports `Status::OutOfEnvelope` instead of `Solved`.
+pub const ENVELOPE_LO: [Real; NX] = [-1.0e4, Real::NEG_INFINITY];
+/// Upper end of the plausibility envelope (see `ENVELOPE_LO`).
+pub const ENVELOPE_HI: [Real; NX] = [1.0e4, Real::INFINITY];
 /// Added to the diagonal of the condensed Hessian.
 pub const REGULARISATION: Real = 1e-9;

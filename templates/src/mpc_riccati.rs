@@ -5,7 +5,9 @@
 
 use crate::riccati::{IpmStatus, RiccatiIpm, StageQp};
 use crate::rk4::{discrete_dynamics, discrete_linearization};
-use crate::{Real, ENVELOPE, MAX_IPM_ITERATIONS, N, NU, NX, Q, Q_TERMINAL, R, TRUST_BOUND, U_MAX, U_MIN};
+use crate::{
+    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_IPM_ITERATIONS, N, NU, NX, Q, Q_TERMINAL, R, TRUST_BOUND, U_MAX, U_MIN,
+};
 
 /// What happened in a solve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -20,7 +22,7 @@ pub enum Status {
     InvalidInput,
     /// A non-finite value appeared in the linearisation or the step: the previous plan is kept.
     NumericalFailure,
-    /// x₀ or the reference lies outside `ENVELOPE` (a broken estimator, a wrong unit): the step
+    /// x₀ or the reference lies outside `ENVELOPE_LO`..`ENVELOPE_HI` (a broken estimator, a wrong unit): the step
     /// was taken (u0 finite and within the bounds) but its plan means nothing (as in `mpc.rs`).
     OutOfEnvelope,
 }
@@ -85,9 +87,11 @@ fn all_finite(values: &[Real]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
 
-/// |xᵢ| ≤ `ENVELOPE[i]` for every state (false for a NaN).
+/// `ENVELOPE_LO[i]` ≤ xᵢ ≤ `ENVELOPE_HI[i]` for every state (false for a NaN).
 fn within_envelope(x: &[Real; NX]) -> bool {
-    x.iter().zip(&ENVELOPE).all(|(v, b)| v.abs() <= *b)
+    x.iter()
+        .zip(ENVELOPE_LO.iter().zip(&ENVELOPE_HI))
+        .all(|(v, (lo, hi))| *v >= *lo && *v <= *hi)
 }
 
 /// |xᵢ| ≤ `TRUST_BOUND[i]` for every state (false for a NaN).
@@ -253,7 +257,7 @@ impl Mpc {
     }
 
     /// Finish the step with the measurement x₀: the interior-point QP, guess update. A step that
-    /// would report success from an x₀ or reference outside `ENVELOPE` reports `OutOfEnvelope`.
+    /// would report success from an x₀ or reference outside `ENVELOPE_LO`..`ENVELOPE_HI` reports `OutOfEnvelope`.
     pub fn feedback(&mut self, x0: &[Real; NX]) -> Solution {
         let mut solution = self.feedback_step(x0);
         let usable = matches!(

@@ -68,10 +68,27 @@ pub const TRUST_BOUND: [Real; NX] = [
     6.0,
     6.0,
 ];
-/// Plausibility envelope of x₀ and the reference, |xᵢ| ≤ ENVELOPE[i] (`Real::INFINITY`: none):
-/// far outside the states the model was identified and checked on (docs/mpc.md, "Plausibility").
-/// A solve from beyond it reports `Status::OutOfEnvelope` instead of `Solved`.
-pub const ENVELOPE: [Real; NX] = [
+/// Plausibility envelope of x₀ and the reference, ENVELOPE_LO[i] ≤ xᵢ ≤ ENVELOPE_HI[i]
+/// (`Real::NEG_INFINITY`, `Real::INFINITY`: none): the model file's `envelope` (the operating
+/// envelope it was identified on, widened) where it declares one, else generic bounds far outside
+/// the states the model was checked on (docs/mpc.md, "Plausibility"). A solve from beyond it
+/// reports `Status::OutOfEnvelope` instead of `Solved`.
+pub const ENVELOPE_LO: [Real; NX] = [
+    -10000.0,
+    -10000.0,
+    -10000.0,
+    -1.5,
+    -1.5,
+    Real::NEG_INFINITY,
+    -50.0,
+    -50.0,
+    -50.0,
+    -30.0,
+    -30.0,
+    -30.0,
+];
+/// Upper end of the plausibility envelope (see `ENVELOPE_LO`).
+pub const ENVELOPE_HI: [Real; NX] = [
     10000.0,
     10000.0,
     10000.0,

@@ -9,8 +9,8 @@ use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization};
 use crate::{
-    Real, ENVELOPE, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION,
-    TRUST_BOUND, U_MAX, U_MIN,
+    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R,
+    REGULARISATION, TRUST_BOUND, U_MAX, U_MIN,
 };
 /// What happened in a solve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -25,7 +25,7 @@ pub enum Status {
     InvalidInput,
     /// A non-finite value appeared in the linearisation or the step: the previous plan is kept.
     NumericalFailure,
-    /// x₀ or the reference lies outside `ENVELOPE` (a broken estimator, a wrong unit): the step
+    /// x₀ or the reference lies outside `ENVELOPE_LO`..`ENVELOPE_HI` (a broken estimator, a wrong unit): the step
     /// was taken as usual and u0 is finite and within bounds, but the model is extrapolated far
     /// beyond its data, so the input is not to be trusted.
     OutOfEnvelope,
@@ -88,9 +88,11 @@ impl Default for Mpc {
 fn all_finite(values: &[Real]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
-/// |xᵢ| ≤ `ENVELOPE[i]` for every state (false for a NaN).
+/// `ENVELOPE_LO[i]` ≤ xᵢ ≤ `ENVELOPE_HI[i]` for every state (false for a NaN).
 fn within_envelope(x: &[Real; NX]) -> bool {
-    x.iter().zip(&ENVELOPE).all(|(v, b)| v.abs() <= *b)
+    x.iter()
+        .zip(ENVELOPE_LO.iter().zip(&ENVELOPE_HI))
+        .all(|(v, (lo, hi))| *v >= *lo && *v <= *hi)
 }
 /// |xᵢ| ≤ `TRUST_BOUND[i]` for every state (false for a NaN).
 #[inline]
@@ -342,7 +344,7 @@ impl Mpc {
         if cost.is_finite() { cost } else { Real::MAX }
     }
     /// Finish the step with the measurement x₀: gradient, QP, guess update. A step that would
-    /// report success from an x₀ or reference outside `ENVELOPE` reports `OutOfEnvelope`.
+    /// report success from an x₀ or reference outside `ENVELOPE_LO`..`ENVELOPE_HI` reports `OutOfEnvelope`.
     pub fn feedback(&mut self, x0: &[Real; NX]) -> Solution {
         let mut solution = self.feedback_step(x0);
         let usable = matches!(

@@ -110,7 +110,7 @@ fn self_check(args: &DiagnoseArgs) -> Result<(), String> {
         ..SelfCheckOptions::default()
     };
     super::refuse_existing(&args.out, args.force)?;
-    let bar = super::identify::progress_bar(options.cases.len(), "cases");
+    let bar = super::progress::bar(options.cases.len(), "cases");
     let check = selfcheck::run(&args.plants, &options, &mut |done, _, case| {
         bar.set_position(done as u64);
         bar.set_message(case.to_string());
@@ -165,14 +165,16 @@ fn closed_loop(
         let text = serde_json::to_string(corrected).map_err(|e| e.to_string())?;
         let corrected = uavgen::model::parse(&text, "corrected.json").map_err(|e| e.to_string())?;
         eprintln!("flying the base and the corrected model on {} ...", plant.display());
-        uavgen::track::compare::compare(
-            base,
-            &corrected,
-            &plant_file,
-            30.0,
-            mpc,
-            std::path::Path::new("target/uavgen-track/diagnose"),
-        )
+        super::progress::with_spinner("closed loops: base and corrected model", || {
+            uavgen::track::compare::compare(
+                base,
+                &corrected,
+                &plant_file,
+                30.0,
+                mpc,
+                std::path::Path::new("target/uavgen-track/diagnose"),
+            )
+        })
     };
     match run() {
         Ok(runs) => {
@@ -293,7 +295,7 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
             format!("{} held-out log(s)", holdout.len())
         }
     );
-    let bar = super::identify::progress_bar(0, "candidates");
+    let bar = super::progress::bar(0, "candidates");
     let mut d = diagnose_with_progress(&model, &train, &holdout, &options, &mut |p| {
         bar.set_length(p.total as u64);
         bar.set_position(p.done as u64);

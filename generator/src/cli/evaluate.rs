@@ -45,10 +45,32 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
     if let Some(dir) = args.plots.as_ref().filter(|d| d.exists() && !d.is_dir()) {
         return Err(format!("--plots {}: exists and is not a directory", dir.display()));
     }
+    if args.horizon == 0 {
+        return Err("--horizon: must be at least 1 sample, got 0".into());
+    }
+    if args.substeps == Some(0) {
+        return Err("--substeps: must be at least 1, got 0".into());
+    }
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
     let mut logs = Vec::new();
     for path in &args.logs {
-        logs.push(uavgen::logs::load_any(path, args.profile.as_deref()).map_err(|e| e.to_string())?);
+        let log = super::progress::with_spinner(&format!("reading {}", path.display()), || {
+            uavgen::logs::load_any(path, args.profile.as_deref())
+        });
+        logs.push(log.map_err(|e| e.to_string())?);
+    }
+    // Cheap and worth knowing: where a log leaves the envelope the model was identified on.
+    if let Some(e) = &model.envelope {
+        for (path, log) in args.logs.iter().zip(&logs) {
+            let (outside, rows, states) = uavgen::model::envelope::rows_outside(e, log);
+            if outside > 0 {
+                eprintln!(
+                    "note: {}: {outside} of {rows} rows outside the model's envelope ({}): the model extrapolates there",
+                    path.display(),
+                    states.join(", ")
+                );
+            }
+        }
     }
     let options = EvaluateOptions {
         horizon: args.horizon,
@@ -56,13 +78,18 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
         stale: args.stale,
         ..EvaluateOptions::default()
     };
-    let evaluation = evaluate(&model, &logs, &options).map_err(|e| e.to_string())?;
+    let evaluation =
+        super::progress::with_spinner("evaluating (one-step, horizon and whole-flight predictions)", || {
+            evaluate(&model, &logs, &options)
+        })
+        .map_err(|e| e.to_string())?;
     println!("{evaluation}");
     // The plots first, the JSON last: a failed plot leaves no JSON behind.
     if let Some(dir) = &args.plots {
         std::fs::create_dir_all(dir).map_err(|e| format!("--plots {}: {e}", dir.display()))?;
         for log in &logs {
-            for file in plot_states(&model, log, &options, dir).map_err(|e| e.to_string())? {
+            let files = super::progress::with_spinner("plotting", || plot_states(&model, log, &options, dir));
+            for file in files.map_err(|e| e.to_string())? {
                 eprintln!("wrote {}", file.display());
             }
         }

@@ -12,6 +12,7 @@ use uavgen::identify::sindy::{
     self, AicSelection, Criterion, FittedRows, LibraryKind, Optimizer, Regularizer, SindyOptions,
 };
 use uavgen::logs::stale::StalePolicy;
+use uavgen::model::envelope;
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Method {
@@ -144,16 +145,6 @@ fn stlsq_sweep() -> Vec<f64> {
 /// The default SR3 sweep, as multiples of --threshold.
 const SR3_SWEEP: [f64; 8] = [0.1, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
 
-/// A progress bar on stderr (hidden when stderr is not a terminal).
-pub fn progress_bar(len: usize, what: &str) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::new(len as u64);
-    if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg} ({elapsed})") {
-        bar.set_style(style);
-    }
-    bar.set_message(what.to_string());
-    bar
-}
-
 const INPUTS: [&str; 4] = ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"];
 
 /// What `--input-delay` asks for.
@@ -271,6 +262,13 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     let savgol = SavGol::new(args.savgol_window, args.savgol_order)
         .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
     let delay_spec = parse_delay_spec(&args.input_delay)?;
+    // Every value is checked before any work (the PD options too, which are used last).
+    if matches!(args.method, Method::Pd) {
+        check_positive("mass", args.mass)?;
+        if let Some(lambda) = args.lowpass {
+            check_positive("lowpass", lambda)?;
+        }
+    }
     if let Some(t) = args.threshold {
         if !(t.is_finite() && t >= 0.0) {
             return Err(format!("--threshold: must be a finite number >= 0, got {t}"));
@@ -336,7 +334,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             eprintln!(
                 "estimating input delays and lags (--input-delay auto: delays 0..0.5 s, lags 0.02..0.8 s; held-out one-step error of the driven row, guarded by its loop's held-out free runs) ..."
             );
-            let est = estimate_response(&logs, savgol, Targets::Trapezoid)?;
+            let est = super::progress::with_spinner("estimating input delays and lags", || {
+                estimate_response(&logs, savgol, Targets::Trapezoid)
+            })?;
             eprintln!(
                 "  held out: {} {}; per channel: delay (Δχ² = 1 range), lag, one-step and loop free-run RMSE before -> after",
                 est.folds, est.fold_kind
@@ -412,12 +412,31 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
                 dataset.len(),
                 logs.len()
             );
-            let fit = pd::fit(&dataset, &options, &name, provenance).map_err(|e| e.to_string())?;
+            let fit = super::progress::with_spinner("fitting the PD model", || {
+                pd::fit(&dataset, &options, &name, provenance)
+            })
+            .map_err(|e| e.to_string())?;
             eprintln!("{}", fit.diagnostics.summary());
             serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())?
         }
     } + "\n";
     let json = attach(&json, &args, response)?;
+    // The operating envelope of the training logs (docs/model-format.md#envelope).
+    let refs: Vec<&uavgen::logs::FlightLog> = logs.iter().collect();
+    let json = match envelope::from_logs(&refs) {
+        Some(e) => {
+            eprintln!(
+                "operating envelope (observed range of the logs, widened): {}",
+                e.bounds
+                    .iter()
+                    .map(|(s, lo, hi)| format!("{s} [{lo}, {hi}]"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            envelope::attach(&json, &args.out.display().to_string(), &e).map_err(|e| e.to_string())?
+        }
+        None => json,
+    };
     // Exactly what `--model` will read, validated before anything is written.
     let model = uavgen::model::parse(&json, &args.out.display().to_string())
         .map_err(|e| format!("the identified model is invalid: {e}"))?;
@@ -426,7 +445,10 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             eprintln!("  corrections: {}", line.trim());
         }
     }
-    if let Some(report) = horizon_check::check(&model, &HorizonCheck::default()) {
+    let report = super::progress::with_spinner("horizon check", || {
+        horizon_check::check(&model, &HorizonCheck::default())
+    });
+    if let Some(report) = report {
         eprintln!("{}", report.summary());
         if !report.passed() && !args.no_horizon_check {
             return Err(format!(
@@ -517,7 +539,7 @@ fn fit_sindy(
             },
             ..SindyOptions::default()
         };
-        let bar = progress_bar(options.sweep.as_ref().map_or(1, Vec::len), "sparsity values");
+        let bar = super::progress::bar(options.sweep.as_ref().map_or(1, Vec::len), "sparsity values");
         let mut f = sindy::fit_with_progress(dataset, &options, name, provenance.clone(), &mut |done, _| {
             bar.set_position(done as u64)
         })
@@ -527,7 +549,10 @@ fn fit_sindy(
         if options.sweep.is_some() && !args.no_horizon_check {
             let check = HorizonCheck::default();
             let with = |fit: &sindy::SindyFit| attach(&fit.to_json(), args, response);
-            if let Some(sel) = select_bounded_corrected(&mut f, &check, &with) {
+            let selection = super::progress::with_spinner(&format!("horizon check (ridge α = {alpha})"), || {
+                select_bounded_corrected(&mut f, &check, &with)
+            });
+            if let Some(sel) = selection {
                 for (row, from, to) in &sel.moves {
                     eprintln!("  horizon check: {row} moved from sparsity {from} to {to}");
                 }

@@ -62,7 +62,10 @@ pub fn run(args: ImportArgs) -> Result<(), String> {
         grid: GridOptions { rate_hz: args.rate },
         partial: args.partial,
     };
-    let imported = import_file(file, &profile, &options).map_err(|e| e.to_string())?;
+    let imported = super::progress::with_spinner(&format!("importing {}", file.display()), || {
+        import_file(file, &profile, &options)
+    })
+    .map_err(|e| e.to_string())?;
     let csv = imported.to_csv();
     // Check the result reads back as a valid log before writing anything.
     uavgen::logs::parse_log(&csv, &out.display().to_string())

@@ -2,9 +2,11 @@
 //! closed loop, diagnosis).
 
 pub mod diagnose;
+pub mod envelope;
 pub mod evaluate;
 pub mod identify;
 pub mod import;
+pub mod progress;
 pub mod simulate;
 pub mod track;
 

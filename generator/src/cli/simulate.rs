@@ -30,8 +30,8 @@ pub fn run(args: SimulateArgs) -> Result<(), String> {
     super::refuse_existing(&args.out, args.force)?;
     let options = SimulateOptions::parse(&args.profile, &args.duration, args.seed).map_err(|e| e.to_string())?;
     let plant = PlantFile::load(&args.plant).map_err(|e| e.to_string())?;
-    let log = simulate(&plant, &options).map_err(|e| e.to_string())?;
-    log.write(&args.out).map_err(|e| e.to_string())?;
+    let log = super::progress::with_spinner("simulating", || simulate(&plant, &options)).map_err(|e| e.to_string())?;
+    super::progress::with_spinner("writing the log", || log.write(&args.out)).map_err(|e| e.to_string())?;
     let effects = plant.effects.active();
     println!(
         "wrote {}: {} rows in {} segment{} at {} Hz, plant `{}` ({}), seed {}",

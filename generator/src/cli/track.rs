@@ -147,7 +147,9 @@ pub fn run(args: TrackArgs) -> Result<ExitCode, String> {
         Box::new(GenericBackend::new(&model, mpc, args.horizon, dt, substeps))
     } else {
         eprintln!("building the generated solver and the tracking harness ...");
-        let (name, binary) = track::build::build_harness(&model, &options, &args.work_dir)?;
+        let (name, binary) = super::progress::with_spinner("building", || {
+            track::build::build_harness(&model, &options, &args.work_dir)
+        })?;
         Box::new(HarnessBackend::spawn(&binary, &name)?)
     };
 
@@ -225,7 +227,7 @@ fn fly_all(
             max_distance: rules.max_distance,
             ..TrackOptions::default()
         };
-        let bar = super::identify::progress_bar((args.duration / dt).round() as usize, which.name());
+        let bar = super::progress::bar((args.duration / dt).round() as usize, which.name());
         let mut extender = track::StateExtender::new(model, dt)?;
         let flight = track::fly(
             backend,

@@ -59,7 +59,7 @@ pub const STATUS_CODES: &[(&str, i32, &str)] = &[
     (
         "OUT_OF_ENVELOPE",
         5,
-        "x0 or the reference lies outside ENVELOPE: the input is finite and within the bounds, the plan means nothing",
+        "x0 or the reference lies outside ENVELOPE_LO..ENVELOPE_HI of the Rust crate (the model's envelope): the input is finite and within the bounds, the plan means nothing",
     ),
     ("NULL_POINTER", -1, "a pointer argument is NULL"),
     (

@@ -10,13 +10,14 @@ use quote::quote;
 use std::collections::BTreeMap;
 
 /// Values of the constants of `templates/src/dims.rs`. `delays`: the pure delay of each input in
-/// s ([`Model::input_delays`]).
+/// s ([`Model::input_delays`]); `declared`: the model file's `envelope` ([`Model::envelope`]).
 pub fn dims_values(
     ir: &ModelIr,
     options: &GenerateOptions,
     substeps: usize,
     mpc: &MpcOptions,
     delays: &[f64],
+    declared: Option<&crate::model::DeclaredEnvelope>,
 ) -> Result<BTreeMap<&'static str, TokenStream>, NonFiniteConstant> {
     let array = |values: &[f64]| -> Result<TokenStream, NonFiniteConstant> {
         let items = values
@@ -47,18 +48,19 @@ pub fn dims_values(
             }
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let plausible = options
-        .envelope
-        .plausibility_bounds(&ir.state_names)
-        .into_iter()
-        .map(|b| {
-            if b.is_finite() {
-                float_literal(b, options.float)
-            } else {
-                Ok(quote!(Real::INFINITY))
-            }
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+    // The plausibility envelope: the model file's declared one, else the generic bounds.
+    let bound = |b: f64| {
+        if b.is_finite() {
+            float_literal(b, options.float)
+        } else if b > 0.0 {
+            Ok(quote!(Real::INFINITY))
+        } else {
+            Ok(quote!(Real::NEG_INFINITY))
+        }
+    };
+    let ranges = options.envelope.plausibility_ranges(&ir.state_names, declared);
+    let lo = ranges.iter().map(|r| bound(r.0)).collect::<Result<Vec<_>, _>>()?;
+    let hi = ranges.iter().map(|r| bound(r.1)).collect::<Result<Vec<_>, _>>()?;
     Ok(BTreeMap::from([
         ("NX", lit(ir.nx)),
         ("NU", lit(ir.nu)),
@@ -75,7 +77,8 @@ pub fn dims_values(
         ("MAX_QP_ITERATIONS", lit(mpc.max_qp_iterations)),
         ("MAX_IPM_ITERATIONS", lit(mpc.max_ipm_iterations)),
         ("TRUST_BOUND", quote!([#(#trust),*])),
-        ("ENVELOPE", quote!([#(#plausible),*])),
+        ("ENVELOPE_LO", quote!([#(#lo),*])),
+        ("ENVELOPE_HI", quote!([#(#hi),*])),
         ("REGULARISATION", float_literal(mpc.regularisation, options.float)?),
     ]))
 }

@@ -47,8 +47,8 @@ pub fn readme(
          }}\n\
          ```\n\n\
          `mpc.solve(&x, &reference)` is `prepare` + `feedback` in one call. The weights, bounds and limits \
-         are the constants `Q`, `Q_TERMINAL`, `R`, `U_MIN`, `U_MAX`, `MAX_QP_ITERATIONS`; `ENVELOPE` bounds the \
-         plausible states. The `uavgen-runtime` crate wraps this loop (`Controller`, delay compensation).\n\n\
+         are the constants `Q`, `Q_TERMINAL`, `R`, `U_MIN`, `U_MAX`, `MAX_QP_ITERATIONS`; `ENVELOPE_LO`, `ENVELOPE_HI` \
+         bound the plausible x₀ and reference ({envelope}; beyond them a solve reports `OutOfEnvelope`). The `uavgen-runtime` crate wraps this loop (`Controller`, delay compensation).\n\n\
          See uavgen's docs/generated-api.md and docs/mpc.md for the full API.\n{c_api}",
         model.name,
         model.kind_name(),
@@ -60,6 +60,13 @@ pub fn readme(
         options.horizon,
         options.rate_hz,
         substeps,
+        envelope = match &model.envelope {
+            Some(e) => format!(
+                "the model file's envelope on {}, generic bounds elsewhere",
+                e.bounds.iter().map(|b| b.0.as_str()).collect::<Vec<_>>().join(", ")
+            ),
+            None => "generic bounds: the model file declares no envelope".to_string(),
+        },
         c_api = if options.c_api {
             let p = super::c_api::prefix(crate_name);
             format!(

@@ -245,7 +245,14 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
 
     let dims = splice::specialise_dims(
         options.float.name(),
-        &lib_rs::dims_values(&ir, options, substeps, &mpc, &model.input_delays())?,
+        &lib_rs::dims_values(
+            &ir,
+            options,
+            substeps,
+            &mpc,
+            &model.input_delays(),
+            model.envelope.as_ref(),
+        )?,
     )
     .map_err(GenerateError::Template)?;
     let (model_tokens, used_math) = model_rs::emit(&ir, options.float)?;

@@ -127,6 +127,21 @@ impl Envelope {
             .collect()
     }
 
+    /// The plausibility range [lo, hi] of each state (`ENVELOPE_LO`, `ENVELOPE_HI` of the
+    /// generated crate): the model file's declared envelope where it names the state, else
+    /// ±[`Envelope::plausibility_bounds`] (±`f64::INFINITY` where there is none).
+    pub fn plausibility_ranges(
+        &self,
+        states: &[String],
+        declared: Option<&crate::model::DeclaredEnvelope>,
+    ) -> Vec<(f64, f64)> {
+        states
+            .iter()
+            .zip(self.plausibility_bounds(states))
+            .map(|(name, b)| declared.and_then(|d| d.get(name)).unwrap_or((-b, b)))
+            .collect()
+    }
+
     /// The hover point (all zero) followed by `samples` uniform random points,
     /// each a vector over `names` (states then inputs). Deterministic.
     pub fn points(&self, names: &[String]) -> Vec<Vec<f64>> {

@@ -60,6 +60,8 @@ pub fn parse(text: &str, label: &str) -> Result<Model, ModelError> {
     let huge = validate::first_out_of_range(&Value::Object(obj.clone()), validate::MODEL_MAX_ABS, &["provenance"]);
     // The corrections block belongs to every kind and is read on its own, after the kind's schema.
     let corrections = obj.remove("corrections");
+    // So is the envelope, checked against the states (with the corrections' extra states).
+    let envelope = obj.remove("envelope");
     let model = match obj.get("kind").cloned() {
         None => Err(ModelError::new(
             label,
@@ -82,6 +84,10 @@ pub fn parse(text: &str, label: &str) -> Result<Model, ModelError> {
             format!("unknown kind {other}: expected \"pd\" or \"sindy\""),
         )),
     }?;
+    let mut model = model;
+    if let Some(v) = &envelope {
+        model.envelope = Some(super::envelope::parse(v, label, &model.states)?);
+    }
     if let Some((path, v)) = huge {
         return Err(ModelError::new(
             label,
@@ -147,7 +153,7 @@ fn typed<T: DeserializeOwned>(value: Value, label: &str, prefix: &str) -> Result
         let top_level = prefix.is_empty() && !path.contains(['.', '[']);
         if top_level && inner.starts_with("unknown field") && inner.contains("expected one of") {
             // `corrections` is valid at the top level of every kind but read separately.
-            inner.push_str(", `corrections`");
+            inner.push_str(", `corrections`, `envelope`");
         }
         let kind = if inner.starts_with("missing field") {
             K::MissingField
@@ -346,6 +352,7 @@ fn validate_pd(f: PdFile, corrections: Option<Corrections>, label: &str, source:
         provenance: f.provenance,
         dynamics: Dynamics::Pd(p),
         corrections: None,
+        envelope: None,
         source,
     };
     finish(base, corrections, label)
@@ -552,6 +559,7 @@ fn validate_sindy(
         provenance: f.provenance,
         dynamics: Dynamics::Sindy(SindySpec { library, rows }),
         corrections: None,
+        envelope: None,
         source,
     };
     finish(base, corrections, label)

@@ -5,7 +5,8 @@
 //! number), then `format` and `kind` are checked and the value is
 //! deserialised into the schema of its kind (errors carry the JSON path), and
 //! finally the semantic checks run (names, terms, counts, duplicates), and those of the optional
-//! `corrections` block ([`Corrections`]).
+//! `corrections` block ([`Corrections`]) and of the optional `envelope` block
+//! ([`DeclaredEnvelope`]).
 //!
 //! **States of a corrected model.** After loading, [`Model::states`] is the full state vector:
 //! the file's states, then the extra states of the corrections (`<input>_lagged` in input order,
@@ -14,6 +15,7 @@
 //! states for a corrected model).
 
 pub mod corrections;
+pub mod envelope;
 mod error;
 pub mod file;
 mod load;
@@ -21,6 +23,7 @@ pub mod pysindy;
 pub mod term;
 
 pub use corrections::{attach as attach_corrections, Corrections, Drag, GroundEffect, ThrustDecay};
+pub use envelope::DeclaredEnvelope;
 pub use error::{ModelError, ModelErrorKind};
 pub use file::{Coefficient, PdFile, SindyFile, DEFAULT_INPUTS, DEFAULT_STATES, FORMAT};
 pub use load::{load, parse};
@@ -44,6 +47,9 @@ pub struct Model {
     pub dynamics: Dynamics,
     /// The validated `corrections` block, if the file has one.
     pub corrections: Option<Corrections>,
+    /// The validated `envelope` block (the operating envelope the model was identified on), if
+    /// the file has one.
+    pub envelope: Option<DeclaredEnvelope>,
     pub source: Source,
 }
 

@@ -68,6 +68,17 @@ pub fn import(text: &str, label: &str, options: &ImportOptions) -> Result<SindyF
             ),
         ));
     }
+    // Two rows for one state would be merged into one row of the model: refused.
+    for (i, t) in targets.iter().enumerate() {
+        if let Some(first) = targets[..i].iter().position(|u| u == t) {
+            return Err(ModelError::new(
+                label,
+                format!("targets[{i}]"),
+                K::Duplicate,
+                format!("'{t}' is already the target of row {first}: each state may be fitted once"),
+            ));
+        }
+    }
     let mut coefficients = Vec::new();
     for (r, (row, target)) in export.coefficients.iter().zip(&targets).enumerate() {
         if row.len() != export.feature_names.len() {

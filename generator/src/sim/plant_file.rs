@@ -342,6 +342,9 @@ impl PlantFile {
                 ))
             }
             Some(Value::String(f)) if f == PLANT_FORMAT => {}
+            Some(Value::String(f)) if f == NON_FINITE_MARK => {
+                return Err(typed_error(source, "format".into(), NON_FINITE_MARK.into()))
+            }
             Some(other) => {
                 return Err(PlantError::new(
                     source,
