@@ -22,5 +22,5 @@ for r in 1 2 3 4 5; do TRAIN+=(--log "$M/m100_run$r.csv"); done
 $uavgen identify --method sindy "${TRAIN[@]}" --sweep-values 16,20,24,32,40,48,64 \
     --name sindy_m100 --out models/sindy_m100.json --force
 # PD: bounded least squares, m = 2.4 kg, inertias 0.05, 0.05, 0.09 kg m² (docs/pd-fit.md).
-$uavgen identify --method pd "${TRAIN[@]}" --name pd_m100 \
+$uavgen identify --method pd "${TRAIN[@]}" --targets integral --name pd_m100 \
     --out models/pd_m100.json --force

@@ -121,11 +121,12 @@ pub struct IdentifyArgs {
     /// differentiating; `keep` uses the log as recorded (docs/logs.md).
     #[arg(long, value_enum, default_value_t = StalePolicy::Interpolate)]
     stale: StalePolicy,
-    /// SINDy: the regression's targets. `derivative`: Savitzky-Golay derivatives at the samples;
-    /// `integral`: the integral form over each sample interval, (x_{k+1} − x_k)/Δt against the
-    /// trapezoid mean of the library, no differentiation (docs/sindy.md, "Targets").
-    #[arg(long, value_enum, default_value_t = TargetsArg::Integral)]
-    targets: TargetsArg,
+    /// The regression's targets (default: `integral` for SINDy, `derivative` for PD). `integral`:
+    /// the integral form over each sample interval, (x_{k+1} − x_k)/Δt against the trapezoid mean
+    /// of the SINDy library (PD: the model at the interval's midpoint state), no differentiation;
+    /// `derivative`: Savitzky-Golay derivatives at the samples (docs/sindy.md, "Targets").
+    #[arg(long, value_enum)]
+    targets: Option<TargetsArg>,
     /// PD: mass in kg.
     #[arg(long, default_value_t = 2.4)]
     mass: f64,
@@ -317,9 +318,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             args.logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
         ));
     }
-    let targets = match (&args.method, args.targets) {
-        (Method::Sindy, TargetsArg::Integral) => Targets::Trapezoid,
-        _ => Targets::SavGol,
+    let targets = match (args.targets, &args.method) {
+        (Some(TargetsArg::Integral), _) | (None, Method::Sindy) => Targets::Trapezoid,
+        (Some(TargetsArg::Derivative), _) | (None, Method::Pd) => Targets::SavGol,
     };
     let (response, estimate) = match delay_spec {
         DelaySpec::None => (None, None),

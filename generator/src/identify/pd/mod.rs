@@ -334,6 +334,15 @@ fn prepare(dataset: &Dataset, options: &PdFitOptions) -> Result<Vec<Samples>, Pd
         }
         let n = seg.x.len().min(seg.u.len()).min(seg.dx.len());
         let (mut x, mut u, mut dx) = (seg.x[..n].to_vec(), seg.u[..n].to_vec(), seg.dx[..n].to_vec());
+        if seg.x_next.len() == seg.x.len() {
+            // The integral form (dataset::Targets::Trapezoid): the interval's mean slope against
+            // the model at the interval's midpoint state (the midpoint rule).
+            for (xm, x1) in x.iter_mut().zip(&seg.x_next) {
+                for (a, b) in xm.iter_mut().zip(x1) {
+                    *a = 0.5 * (*a + b);
+                }
+            }
+        }
         if let Some(lp) = &options.lowpass {
             x = try_columnwise(&x, |y| lp.try_apply(y, seg.dt))?;
             u = try_columnwise(&u, |y| lp.try_apply(y, seg.dt))?;
