@@ -365,10 +365,29 @@ fn check(args: CheckArgs) -> Result<(), String> {
         None => println!("  RK4 at {} Hz: {} substeps (given)", args.rate, generated.substeps),
     }
     println!(
-        "  generation: ok (crate `{}`, {} files, N = {})",
+        "  generation: ok (crate `{}`, {} files, N = {}, qp = {})",
         generated.crate_name,
         generated.files.len(),
-        options.horizon
+        options.horizon,
+        generated.qp.name()
+    );
+    let s = &generated.structure;
+    let (nza, nzb) = s.nonzeros();
+    let (after, dense) = (
+        s.flops(options.horizon),
+        uavgen::codegen::kernels::Structure::dense(s.nx, s.nu).flops(options.horizon),
+    );
+    println!(
+        "  structure: A {nza} of {}, B {nzb} of {} structural non-zeros; multiply-adds per RTI step of the emitted \
+         kernels (condensed QP): condensing {} (dense {}), feedback {} (dense {}), total {} (dense {})",
+        s.nx * s.nx,
+        s.nx * s.nu,
+        after.condensing,
+        dense.condensing,
+        after.feedback,
+        dense.feedback,
+        after.total(),
+        dense.total()
     );
     Ok(())
 }

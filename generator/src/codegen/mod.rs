@@ -3,6 +3,7 @@
 
 pub mod c_api;
 pub mod header;
+pub mod kernels;
 mod lib_rs;
 mod manifest;
 mod model_rs;
@@ -139,6 +140,10 @@ pub struct GeneratedCrate {
     pub substeps: usize,
     pub substep_choice: Option<SubstepChoice>,
     pub files: Vec<(PathBuf, String)>,
+    /// The QP solver the crate carries.
+    pub qp: QpMethod,
+    /// Structural patterns of its stage matrices (the emitted `kernels.rs` of a condensed crate).
+    pub structure: kernels::Structure,
 }
 
 fn invalid(option: &'static str, message: impl Into<String>) -> GenerateError {
@@ -288,6 +293,13 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
             rs_header.clone() + &prettyplease::unparse(&splice::template(source)),
         ));
     }
+    let structure = kernels::Structure::from_ir(&ir, substeps, &mpc.q, &mpc.q_terminal);
+    if qp == QpMethod::Condensed {
+        files.push((
+            PathBuf::from("src/kernels.rs"),
+            rs_header.clone() + &format_file(structure.emit(options.horizon), "kernels.rs")?,
+        ));
+    }
     if options.c_api {
         let api = c_api::CApi {
             crate_name: &crate_name,
@@ -304,5 +316,7 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         substeps,
         substep_choice,
         files,
+        qp,
+        structure,
     })
 }
