@@ -378,10 +378,11 @@ fn check(args: CheckArgs) -> Result<(), String> {
         uavgen::codegen::kernels::Structure::dense(s.nx, s.nu).flops(options.horizon),
     );
     println!(
-        "  structure: A {nza} of {}, B {nzb} of {} structural non-zeros; multiply-adds per RTI step of the emitted \
+        "  structure: A {nza} of {}, B {nzb} of {} structural non-zeros, input components {:?}; multiply-adds per RTI step of the emitted \
          kernels (condensed QP): condensing {} (dense {}), feedback {} (dense {}), total {} (dense {})",
         s.nx * s.nx,
         s.nx * s.nu,
+        s.input_components(),
         after.condensing,
         dense.condensing,
         after.feedback,

@@ -5,8 +5,8 @@
 //! Real-time-iteration MPC: one Gauss-Newton SQP step per sample on the
 //! multiple-shooting NLP, condensed into a dense box QP in the N·NU inputs.
 //! The algorithm and its notation are those of docs/mpc.md.
-use crate::math::sqrt;
 use crate::kernels;
+use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization};
 use crate::{

@@ -63,6 +63,7 @@ pub const E_PATTERN: [[bool; NX]; NU] = [
     [true, true, true, true, true, true, true, true, true, true, true, true],
 ];
 /// Bᵀ P (P with `P_PATTERN`).
+#[inline(always)]
 pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     let mut m = [[0.0; NX]; NU];
     m[0][0] = b[0][0] * p[0][0] + b[6][0] * p[6][0] + b[8][0] * p[8][0];
@@ -216,6 +217,7 @@ pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     m
 }
 /// E B (E with `E_PATTERN`).
+#[inline(always)]
 pub fn e_b(e: &[[Real; NX]; NU], b: &[[Real; NU]; NX]) -> [[Real; NU]; NU] {
     let mut out = [[0.0; NU]; NU];
     out[0][0] = e[0][0] * b[0][0] + e[0][1] * b[1][0] + e[0][2] * b[2][0]
@@ -277,6 +279,7 @@ pub fn e_b(e: &[[Real; NX]; NU], b: &[[Real; NU]; NX]) -> [[Real; NU]; NU] {
     out
 }
 /// E A (E with `E_PATTERN`).
+#[inline(always)]
 pub fn e_a(e: &[[Real; NX]; NU], a: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     let mut out = [[0.0; NX]; NU];
     out[0][0] = e[0][0] * a[0][0];
@@ -398,6 +401,7 @@ pub fn e_a(e: &[[Real; NX]; NU], a: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     out
 }
 /// Aᵀ (P A) (P with `P_PATTERN`).
+#[inline(always)]
 pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
     let mut t = [[0.0; NX]; NX];
     t[0][0] = p[0][0] * a[0][0];
@@ -994,6 +998,7 @@ pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
     out
 }
 /// y + A x
+#[inline(always)]
 pub fn a_x_add(a: &[[Real; NX]; NX], x: &[Real; NX], y: &[Real; NX]) -> [Real; NX] {
     let mut out = *y;
     out[0] = y[0] + a[0][0] * x[0] + a[0][3] * x[3] + a[0][4] * x[4] + a[0][5] * x[5]
@@ -1025,6 +1030,7 @@ pub fn a_x_add(a: &[[Real; NX]; NX], x: &[Real; NX], y: &[Real; NX]) -> [Real; N
     out
 }
 /// y + B v
+#[inline(always)]
 pub fn b_x_add(b: &[[Real; NU]; NX], v: &[Real; NU], y: &[Real; NX]) -> [Real; NX] {
     let mut out = *y;
     out[0] = y[0] + b[0][0] * v[0] + b[0][1] * v[1] + b[0][2] * v[2] + b[0][3] * v[3];
@@ -1042,6 +1048,7 @@ pub fn b_x_add(b: &[[Real; NU]; NX], v: &[Real; NU], y: &[Real; NX]) -> [Real; N
     out
 }
 /// y + Bᵀ p
+#[inline(always)]
 pub fn bt_x_add(b: &[[Real; NU]; NX], p: &[Real; NX], y: &[Real; NU]) -> [Real; NU] {
     let mut out = *y;
     out[0] = y[0] + b[0][0] * p[0] + b[1][0] * p[1] + b[2][0] * p[2] + b[6][0] * p[6]
@@ -1058,6 +1065,7 @@ pub fn bt_x_add(b: &[[Real; NU]; NX], p: &[Real; NX], y: &[Real; NU]) -> [Real; 
     out
 }
 /// Aᵀ p
+#[inline(always)]
 pub fn at_x(a: &[[Real; NX]; NX], p: &[Real; NX]) -> [Real; NX] {
     let mut out = [0.0; NX];
     out[0] = a[0][0] * p[0];

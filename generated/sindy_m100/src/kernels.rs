@@ -63,6 +63,7 @@ pub const E_PATTERN: [[bool; NX]; NU] = [
     [true, true, false, true, true, true, true, true, false, true, true, true],
 ];
 /// Bᵀ P (P with `P_PATTERN`).
+#[inline(always)]
 pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     let mut m = [[0.0; NX]; NU];
     m[0][2] = b[2][0] * p[2][2] + b[8][0] * p[8][2];
@@ -148,6 +149,7 @@ pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     m
 }
 /// E B (E with `E_PATTERN`).
+#[inline(always)]
 pub fn e_b(e: &[[Real; NX]; NU], b: &[[Real; NU]; NX]) -> [[Real; NU]; NU] {
     let mut out = [[0.0; NU]; NU];
     out[0][0] = e[0][2] * b[2][0] + e[0][8] * b[8][0];
@@ -178,6 +180,7 @@ pub fn e_b(e: &[[Real; NX]; NU], b: &[[Real; NU]; NX]) -> [[Real; NU]; NU] {
     out
 }
 /// E A (E with `E_PATTERN`).
+#[inline(always)]
 pub fn e_a(e: &[[Real; NX]; NU], a: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     let mut out = [[0.0; NX]; NU];
     out[0][2] = e[0][2] * a[2][2];
@@ -239,6 +242,7 @@ pub fn e_a(e: &[[Real; NX]; NU], a: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     out
 }
 /// Aᵀ (P A) (P with `P_PATTERN`).
+#[inline(always)]
 pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
     let mut t = [[0.0; NX]; NX];
     t[0][0] = p[0][0] * a[0][0];
@@ -605,6 +609,7 @@ pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
     out
 }
 /// y + A x
+#[inline(always)]
 pub fn a_x_add(a: &[[Real; NX]; NX], x: &[Real; NX], y: &[Real; NX]) -> [Real; NX] {
     let mut out = *y;
     out[0] = y[0] + a[0][0] * x[0] + a[0][3] * x[3] + a[0][4] * x[4] + a[0][5] * x[5]
@@ -628,6 +633,7 @@ pub fn a_x_add(a: &[[Real; NX]; NX], x: &[Real; NX], y: &[Real; NX]) -> [Real; N
     out
 }
 /// y + B v
+#[inline(always)]
 pub fn b_x_add(b: &[[Real; NU]; NX], v: &[Real; NU], y: &[Real; NX]) -> [Real; NX] {
     let mut out = *y;
     out[0] = y[0] + b[0][1] * v[1] + b[0][2] * v[2] + b[0][3] * v[3];
@@ -645,6 +651,7 @@ pub fn b_x_add(b: &[[Real; NU]; NX], v: &[Real; NU], y: &[Real; NX]) -> [Real; N
     out
 }
 /// y + Bᵀ p
+#[inline(always)]
 pub fn bt_x_add(b: &[[Real; NU]; NX], p: &[Real; NX], y: &[Real; NU]) -> [Real; NU] {
     let mut out = *y;
     out[0] = y[0] + b[2][0] * p[2] + b[8][0] * p[8];
@@ -658,6 +665,7 @@ pub fn bt_x_add(b: &[[Real; NU]; NX], p: &[Real; NX], y: &[Real; NU]) -> [Real; 
     out
 }
 /// Aᵀ p
+#[inline(always)]
 pub fn at_x(a: &[[Real; NX]; NX], p: &[Real; NX]) -> [Real; NX] {
     let mut out = [0.0; NX];
     out[0] = a[0][0] * p[0];

@@ -167,6 +167,48 @@ impl Structure {
         Self::new(&nz(&ir.fx), &nz(&ir.fu), substeps, q, q_terminal)
     }
 
+    /// Connected components of the inputs in the condensed Hessian: inputs r and c are coupled
+    /// if some block H_ij (any stages) has a structurally non-zero entry (r, c), i.e. if
+    /// (E B)[r][c] or (E B)[c][r] may be non-zero (H_ii = M Bᵢ + R, M within `E_PATTERN`). The
+    /// QP variables of different components never couple, so the Cholesky factor of any subset
+    /// of them has no entry between components. Component ids are numbered by first input.
+    pub fn input_components(&self) -> Vec<usize> {
+        let eb = mul(&self.e, &self.b);
+        let nu = self.nu;
+        let mut id: Vec<usize> = (0..nu).collect();
+        // Union-find by repeated relabelling (NU is small).
+        loop {
+            let mut changed = false;
+            for r in 0..nu {
+                for c in 0..nu {
+                    if (eb[r][c] || eb[c][r]) && id[r] != id[c] {
+                        let (lo, hi) = (id[r].min(id[c]), id[r].max(id[c]));
+                        for v in id.iter_mut() {
+                            if *v == hi {
+                                *v = lo;
+                            }
+                        }
+                        changed = true;
+                    }
+                }
+            }
+            if !changed {
+                break;
+            }
+        }
+        // Renumber 0, 1, … in order of first appearance.
+        let mut seen: Vec<usize> = Vec::new();
+        id.iter()
+            .map(|v| match seen.iter().position(|s| s == v) {
+                Some(p) => p,
+                None => {
+                    seen.push(*v);
+                    seen.len() - 1
+                }
+            })
+            .collect()
+    }
+
     /// Structural non-zeros of (A, B).
     pub fn nonzeros(&self) -> (usize, usize) {
         (count(&self.a), count(&self.b))
@@ -332,6 +374,7 @@ impl Structure {
             pub const E_PATTERN: [[bool; NX]; NU] = #pe;
 
             /// Bᵀ P (P with `P_PATTERN`).
+            #[inline(always)]
             pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
                 let mut m = [[0.0; NX]; NU];
                 #(#bt_p)*
@@ -339,6 +382,7 @@ impl Structure {
             }
 
             /// E B (E with `E_PATTERN`).
+            #[inline(always)]
             pub fn e_b(e: &[[Real; NX]; NU], b: &[[Real; NU]; NX]) -> [[Real; NU]; NU] {
                 let mut out = [[0.0; NU]; NU];
                 #(#e_b)*
@@ -346,6 +390,7 @@ impl Structure {
             }
 
             /// E A (E with `E_PATTERN`).
+            #[inline(always)]
             pub fn e_a(e: &[[Real; NX]; NU], a: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
                 let mut out = [[0.0; NX]; NU];
                 #(#e_a)*
@@ -353,6 +398,7 @@ impl Structure {
             }
 
             /// Aᵀ (P A) (P with `P_PATTERN`).
+            #[inline(always)]
             pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
                 let mut t = [[0.0; NX]; NX];
                 #(#pa)*
@@ -362,6 +408,7 @@ impl Structure {
             }
 
             /// y + A x
+            #[inline(always)]
             pub fn a_x_add(a: &[[Real; NX]; NX], x: &[Real; NX], y: &[Real; NX]) -> [Real; NX] {
                 let mut out = *y;
                 #(#a_x)*
@@ -369,6 +416,7 @@ impl Structure {
             }
 
             /// y + B v
+            #[inline(always)]
             pub fn b_x_add(b: &[[Real; NU]; NX], v: &[Real; NU], y: &[Real; NX]) -> [Real; NX] {
                 let mut out = *y;
                 #(#b_x)*
@@ -376,6 +424,7 @@ impl Structure {
             }
 
             /// y + Bᵀ p
+            #[inline(always)]
             pub fn bt_x_add(b: &[[Real; NU]; NX], p: &[Real; NX], y: &[Real; NU]) -> [Real; NU] {
                 let mut out = *y;
                 #(#bt_x)*
@@ -383,6 +432,7 @@ impl Structure {
             }
 
             /// Aᵀ p
+            #[inline(always)]
             pub fn at_x(a: &[[Real; NX]; NX], p: &[Real; NX]) -> [Real; NX] {
                 let mut out = [0.0; NX];
                 #(#at_x)*
