@@ -379,7 +379,7 @@ fn check(args: CheckArgs) -> Result<(), String> {
     );
     println!(
         "  structure: A {nza} of {}, B {nzb} of {} structural non-zeros, input components {:?}; multiply-adds per RTI step of the emitted \
-         kernels (condensed QP): condensing {} (dense {}), feedback {} (dense {}), total {} (dense {})",
+         kernels (condensed QP): condensing {} (dense {}), feedback {} (dense {}), Cholesky of H with every input free {} (dense {}), total {} (dense {})",
         s.nx * s.nx,
         s.nx * s.nu,
         s.input_components(),
@@ -387,6 +387,8 @@ fn check(args: CheckArgs) -> Result<(), String> {
         dense.condensing,
         after.feedback,
         dense.feedback,
+        after.cholesky,
+        dense.cholesky,
         after.total(),
         dense.total()
     );

@@ -20,6 +20,10 @@ pub const P_PATTERN: [[bool; NX]; NX] = [[true; NX]; NX];
 /// Structural non-zeros of every chain E = Bᵢᵀ Pᵢ₊₁ Aᵢ ⋯ A_{j+1} (closed under E ↦ E A).
 pub const E_PATTERN: [[bool; NX]; NU] = [[true; NX]; NU];
 
+/// Component of each input in the condensed Hessian's coupling graph: H has exact zeros between
+/// the inputs (of any stages) of different components. Numbered largest component first.
+pub const INPUT_COMPONENT: [u8; NU] = [0; NU];
+
 /// Bᵀ P (P with `P_PATTERN`).
 pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     let mut m = [[0.0; NX]; NU];

@@ -7,7 +7,7 @@
 Structural non-zeros: Aₖ 78 of 144, Bₖ 42 of 48, every Pᵢ 126 of 144, every chain E 48 of 48.
 
 Multiply-adds per call: Bᵀ P 433, E B 168, E A 312, Aᵀ P A 1586, A x 78, B v 42, Bᵀ p 42, Aᵀ p 78.
-Per RTI step (N = 30): condensing 272824 (dense 457344), feedback 9462 (dense 15696).*/
+Per RTI step (N = 30): condensing 272824 (dense 457344), feedback 9462 (dense 15696), Cholesky of the condensed Hessian with every input free 288000 (dense 288000; input components [0, 0, 0, 0]).*/
 #![allow(clippy::all, unused_variables, unused_mut)]
 use crate::{Real, NU, NX};
 /// Structural non-zeros of Aₖ = ∂F/∂x.
@@ -62,6 +62,9 @@ pub const E_PATTERN: [[bool; NX]; NU] = [
     [true, true, true, true, true, true, true, true, true, true, true, true],
     [true, true, true, true, true, true, true, true, true, true, true, true],
 ];
+/// Component of each input in the condensed Hessian's coupling graph: H has exact zeros
+/// between the inputs (of any stages) of different components. Numbered largest first.
+pub const INPUT_COMPONENT: [u8; NU] = [0, 0, 0, 0];
 /// Bᵀ P (P with `P_PATTERN`).
 #[inline(always)]
 pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {

@@ -60,6 +60,12 @@ pub struct BoxQp<const NV: usize> {
     /// kept up to date as variables are fixed and freed.
     fixed_gradient: [Real; NV],
     work: [Real; NV],
+    /// Component of each variable in H's coupling graph (`with_groups`; all 0: one component).
+    /// H_ij = 0 exactly for variables of different components, so the factor of any H_FF has
+    /// exact zeros between them, which the factorisation skips.
+    group: [u8; NV],
+    /// Number of components (largest `group` + 1).
+    groups: u8,
 }
 impl<const NV: usize> Default for BoxQp<NV> {
     fn default() -> Self {
@@ -122,6 +128,21 @@ const PIVOT_TOLERANCE: Real = 1e3 * Real::EPSILON;
 impl<const NV: usize> BoxQp<NV> {
     /// All variables free, nothing factorised.
     pub const fn new() -> Self {
+        Self::with_groups([0; NV])
+    }
+    /// Like [`Self::new`] for an H whose variables fall into components that never couple:
+    /// H_ij = 0 (exactly) whenever `group[i] != group[j]`. Fresh factorisations order the free
+    /// variables by component (component 0 first), and the factorisation skips the exact zeros
+    /// of the factor between components.
+    pub const fn with_groups(group: [u8; NV]) -> Self {
+        let mut groups = 0u8;
+        let mut i = 0;
+        while i < NV {
+            if group[i] >= groups {
+                groups = group[i].saturating_add(1);
+            }
+            i += 1;
+        }
         Self {
             l: [[0.0; NV]; NV],
             free: [0; NV],
@@ -131,6 +152,8 @@ impl<const NV: usize> BoxQp<NV> {
             target: [0.0; NV],
             fixed_gradient: [0.0; NV],
             work: [0.0; NV],
+            group,
+            groups,
         }
     }
     /// Free variable number `i` (factor order), clamped so that indexing with
@@ -169,11 +192,13 @@ impl<const NV: usize> BoxQp<NV> {
     /// Fails if a pivot is ≤ tolerance · H_ii (H not numerically positive definite).
     pub fn factorize(&mut self, h: &[[Real; NV]; NV]) -> Result<(), QpStatus> {
         self.nf = 0;
-        for k in 0..NV {
-            let i = if REVERSED_ORDER { NV - 1 - k } else { k };
-            if self.state[i] == Bound::Free {
-                self.free[self.nf % NV] = i;
-                self.nf += 1;
+        for g in 0..self.groups {
+            for k in 0..NV {
+                let i = if REVERSED_ORDER { NV - 1 - k } else { k };
+                if self.state[i] == Bound::Free && self.group[i] == g {
+                    self.free[self.nf % NV] = i;
+                    self.nf += 1;
+                }
             }
         }
         self.factor_rows(h, 0)
@@ -225,21 +250,32 @@ impl<const NV: usize> BoxQp<NV> {
         let nf = self.nf.min(NV);
         let free = self.free;
         let var = |i: usize| free[i % NV].min(NV - 1);
+        let group = self.group;
+        let mut first = [nf; NV];
+        for i in (0..nf).rev() {
+            first[usize::from(group[var(i)]) % NV] = i;
+        }
         for i in from..nf {
             if i >= NV {
                 break;
             }
             let hi = &h[var(i)];
-            let mut j = 0;
+            let gi = group[var(i)];
+            let start = first[usize::from(gi) % NV].min(i);
+            for x in self.l[i][..start].iter_mut() {
+                *x = 0.0;
+            }
+            let mut j = start;
             while j + 4 <= i {
                 let (head, tail) = self.l.split_at_mut(i);
                 let (Some(li), Some(rows)) = (tail.first_mut(), head.get(j..j + 4)) else {
                     break;
                 };
                 let n = j.min(NV);
+                let m = start.min(n);
                 let d = dot4(
-                    &li[..n],
-                    [&rows[0][..n], &rows[1][..n], &rows[2][..n], &rows[3][..n]],
+                    &li[m..n],
+                    [&rows[0][m..n], &rows[1][m..n], &rows[2][m..n], &rows[3][m..n]],
                 );
                 for c in 0..4 {
                     let lj = &rows[c];
@@ -257,7 +293,11 @@ impl<const NV: usize> BoxQp<NV> {
                 j += 4;
             }
             for j in j..=i {
-                let s = hi[var(j)] - dot(&self.l[i][..j], &self.l[j][..j]);
+                if group[var(j)] != gi {
+                    self.l[i][j] = 0.0;
+                    continue;
+                }
+                let s = hi[var(j)] - dot(&self.l[i][start..j], &self.l[j][start..j]);
                 if j < i {
                     self.l[i][j] = s / self.l[j][j];
                 } else {

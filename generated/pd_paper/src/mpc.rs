@@ -80,6 +80,16 @@ pub struct Mpc {
     qp: BoxQp<NV>,
     phase: Phase,
 }
+/// Component of each QP variable (stage k, input r: `kernels::INPUT_COMPONENT[r]`).
+const QP_GROUPS: [u8; NV] = {
+    let mut groups = [0u8; NV];
+    let mut i = 0;
+    while i < NV {
+        groups[i] = kernels::INPUT_COMPONENT[i % NU];
+        i += 1;
+    }
+    groups
+};
 impl Default for Mpc {
     fn default() -> Self {
         Self::new()
@@ -124,7 +134,7 @@ impl Mpc {
             hi: [0.0; NV],
             v: [0.0; NV],
             z: [[0.0; NX]; N + 1],
-            qp: BoxQp::new(),
+            qp: BoxQp::with_groups(QP_GROUPS),
             phase: Phase::Stale,
         }
     }

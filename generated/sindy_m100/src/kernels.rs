@@ -7,7 +7,7 @@
 Structural non-zeros: Aₖ 53 of 144, Bₖ 26 of 48, every Pᵢ 96 of 144, every chain E 32 of 48.
 
 Multiply-adds per call: Bᵀ P 220, E B 74, E A 153, Aᵀ P A 892, A x 53, B v 26, Bᵀ p 26, Aᵀ p 53.
-Per RTI step (N = 30): condensing 133433 (dense 457344), feedback 6277 (dense 15696).*/
+Per RTI step (N = 30): condensing 133433 (dense 457344), feedback 6277 (dense 15696), Cholesky of the condensed Hessian with every input free 126000 (dense 288000; input components [1, 0, 0, 0]).*/
 #![allow(clippy::all, unused_variables, unused_mut)]
 use crate::{Real, NU, NX};
 /// Structural non-zeros of Aₖ = ∂F/∂x.
@@ -62,6 +62,9 @@ pub const E_PATTERN: [[bool; NX]; NU] = [
     [true, true, false, true, true, true, true, true, false, true, true, true],
     [true, true, false, true, true, true, true, true, false, true, true, true],
 ];
+/// Component of each input in the condensed Hessian's coupling graph: H has exact zeros
+/// between the inputs (of any stages) of different components. Numbered largest first.
+pub const INPUT_COMPONENT: [u8; NU] = [1, 0, 0, 0];
 /// Bᵀ P (P with `P_PATTERN`).
 #[inline(always)]
 pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {

@@ -84,11 +84,15 @@ pub struct StepFlops {
     pub condensing: usize,
     /// Feedback: free response N·A x, adjoint N·Bᵀ p + (N−1)·Aᵀ p, guess update N (A x + B v).
     pub feedback: usize,
+    /// Cholesky factorisation of the condensed Hessian with every input free, Σ n³/6 over the
+    /// components of [`Structure::input_components`] (n = N × the component's inputs): the upper
+    /// bound of `prepare`'s factorisation of H_FF (fixed inputs make it smaller).
+    pub cholesky: usize,
 }
 
 impl StepFlops {
     pub fn total(&self) -> usize {
-        self.condensing + self.feedback
+        self.condensing + self.feedback + self.cholesky
     }
 }
 
@@ -196,16 +200,16 @@ impl Structure {
                 break;
             }
         }
-        // Renumber 0, 1, … in order of first appearance.
-        let mut seen: Vec<usize> = Vec::new();
+        // Renumber 0, 1, …: largest component first, then by first input (a stable sort).
+        let mut roots: Vec<usize> = Vec::new();
+        for v in &id {
+            if !roots.contains(v) {
+                roots.push(*v);
+            }
+        }
+        roots.sort_by_key(|r| std::cmp::Reverse(id.iter().filter(|v| *v == r).count()));
         id.iter()
-            .map(|v| match seen.iter().position(|s| s == v) {
-                Some(p) => p,
-                None => {
-                    seen.push(*v);
-                    seen.len() - 1
-                }
-            })
+            .map(|v| roots.iter().position(|r| r == v).unwrap_or(0))
             .collect()
     }
 
@@ -269,6 +273,15 @@ impl Structure {
         StepFlops {
             condensing: n * (k.bt_p + k.e_b) + chains * (k.e_a + k.e_b) + n.saturating_sub(1) * k.at_p_a,
             feedback: n * k.a_x + n * k.bt_x + n.saturating_sub(1) * k.at_x + n * (k.a_x + k.b_x),
+            cholesky: {
+                let components = self.input_components();
+                (0..self.nu)
+                    .map(|g| {
+                        let size = n * components.iter().filter(|&&c| c == g).count();
+                        size * size * size / 6
+                    })
+                    .sum()
+            },
         }
     }
 
@@ -330,6 +343,10 @@ impl Structure {
             quote!([#(#rows),*])
         };
         let (pa_, pb, pp, pe) = (bools(&self.a), bools(&self.b), bools(&self.p), bools(&self.e));
+        let components = self
+            .input_components()
+            .into_iter()
+            .map(|c| Literal::u8_unsuffixed(c as u8));
         let k = self.kernel_flops();
         let (dense, after) = (Structure::dense(self.nx, self.nu).flops(horizon), self.flops(horizon));
         let (nza, nzb) = self.nonzeros();
@@ -338,7 +355,8 @@ impl Structure {
              (templates/src/kernels.rs is the dense reference; generator/src/codegen/kernels.rs).\n\n\
              Structural non-zeros: Aₖ {nza} of {}, Bₖ {nzb} of {}, every Pᵢ {} of {}, every chain E {} of {}.\n\n\
              Multiply-adds per call: Bᵀ P {}, E B {}, E A {}, Aᵀ P A {}, A x {}, B v {}, Bᵀ p {}, Aᵀ p {}.\n\
-             Per RTI step (N = {horizon}): condensing {} (dense {}), feedback {} (dense {}).",
+             Per RTI step (N = {horizon}): condensing {} (dense {}), feedback {} (dense {}), Cholesky of the \
+             condensed Hessian with every input free {} (dense {}; input components {:?}).",
             self.nx * self.nx,
             self.nx * self.nu,
             count(&self.p),
@@ -357,6 +375,9 @@ impl Structure {
             dense.condensing,
             after.feedback,
             dense.feedback,
+            after.cholesky,
+            dense.cholesky,
+            self.input_components(),
         );
         quote! {
             #![doc = #doc]
@@ -372,6 +393,10 @@ impl Structure {
             pub const P_PATTERN: [[bool; NX]; NX] = #pp;
             /// Structural non-zeros of every chain E = Bᵢᵀ Pᵢ₊₁ Aᵢ ⋯ A_{j+1} (closed under E ↦ E A).
             pub const E_PATTERN: [[bool; NX]; NU] = #pe;
+
+            /// Component of each input in the condensed Hessian's coupling graph: H has exact zeros
+            /// between the inputs (of any stages) of different components. Numbered largest first.
+            pub const INPUT_COMPONENT: [u8; NU] = [#(#components),*];
 
             /// Bᵀ P (P with `P_PATTERN`).
             #[inline(always)]
@@ -504,6 +529,7 @@ mod tests {
         assert_eq!(s.p, pat(&[&[1, 0], &[0, 0]]));
         assert_eq!(s.e, pat(&[&[1, 0], &[0, 0]]));
         assert_eq!(s.kernel_flops().e_a, 1);
+        assert_eq!(s.input_components(), vec![0, 1]);
     }
 
     #[test]
