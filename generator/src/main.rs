@@ -377,6 +377,13 @@ fn check(args: CheckArgs) -> Result<(), String> {
         s.flops(options.horizon),
         uavgen::codegen::kernels::Structure::dense(s.nx, s.nu).flops(options.horizon),
     );
+    let (lin, lin_dense) = generated
+        .sensitivity_flops
+        .per_step(options.horizon, generated.substeps);
+    println!(
+        "  linearisation: multiply-adds per RTI step of the emitted sensitivity kernels (∂f/∂x·S and the RK4 \
+         combinations, model evaluation not counted): {lin} (all columns {lin_dense})"
+    );
     println!(
         "  structure: A {nza} of {}, B {nzb} of {} structural non-zeros, input components {:?}; multiply-adds per RTI step of the emitted \
          kernels (condensed QP): condensing {} (dense {}), feedback {} (dense {}), Cholesky of H with every input free {} (dense {}), total {} (dense {})",

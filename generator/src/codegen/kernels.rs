@@ -31,6 +31,9 @@ pub struct Structure {
     pub p: Pattern,
     /// Every chain E (NU × NX).
     pub e: Pattern,
+    /// Every sensitivity S = ∂x/∂(x₀, u) of the RK4 recursion (NX × (NX + NU)); [A B] is its
+    /// value at the end of a sample.
+    pub s: Pattern,
 }
 
 fn zeros(rows: usize, cols: usize) -> Pattern {
@@ -106,6 +109,7 @@ impl Structure {
             b: vec![vec![true; nu]; nx],
             p: vec![vec![true; nx]; nx],
             e: vec![vec![true; nx]; nu],
+            s: vec![vec![true; nx + nu]; nx],
         }
     }
 
@@ -158,7 +162,7 @@ impl Structure {
             }
             e = next;
         }
-        Self { nx, nu, a, b, p, e }
+        Self { nx, nu, a, b, p, e, s }
     }
 
     /// The structure of a model's crate.
@@ -500,6 +504,8 @@ mod tests {
         );
         assert_eq!(s.a, pat(&[&[1, 1], &[0, 1]]));
         assert_eq!(s.b, pat(&[&[1], &[1]]));
+        assert_eq!(s.s, pat(&[&[1, 1, 1], &[0, 1, 1]]));
+        assert_eq!(s.input_components(), vec![0]);
         // P_N = diag(1, 0); Aᵀ P_N A = [[1, h], [h, h²]]: full.
         assert_eq!(s.p, pat(&[&[1, 1], &[1, 1]]));
         assert_eq!(s.e, pat(&[&[1, 1]]));

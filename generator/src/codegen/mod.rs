@@ -6,7 +6,7 @@ pub mod header;
 pub mod kernels;
 mod lib_rs;
 mod manifest;
-mod model_rs;
+pub mod model_rs;
 pub mod splice;
 pub mod write;
 
@@ -144,6 +144,8 @@ pub struct GeneratedCrate {
     pub qp: QpMethod,
     /// Structural patterns of its stage matrices (the emitted `kernels.rs` of a condensed crate).
     pub structure: kernels::Structure,
+    /// Multiply-adds of the emitted sensitivity kernels (linearisation).
+    pub sensitivity_flops: model_rs::SensitivityFlops,
 }
 
 fn invalid(option: &'static str, message: impl Into<String>) -> GenerateError {
@@ -253,7 +255,8 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         &lib_rs::dims_values(&ir, options, substeps, &mpc, &model.input_delays())?,
     )
     .map_err(GenerateError::Template)?;
-    let (model_tokens, used_math) = model_rs::emit(&ir, options.float)?;
+    let structure = kernels::Structure::from_ir(&ir, substeps, &mpc.q, &mpc.q_terminal);
+    let (model_tokens, used_math, sensitivity_flops) = model_rs::emit(&ir, options.float, &structure.s)?;
     let mut files = vec![
         (
             PathBuf::from("Cargo.toml"),
@@ -293,7 +296,6 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
             rs_header.clone() + &prettyplease::unparse(&splice::template(source)),
         ));
     }
-    let structure = kernels::Structure::from_ir(&ir, substeps, &mpc.q, &mpc.q_terminal);
     if qp == QpMethod::Condensed {
         files.push((
             PathBuf::from("src/kernels.rs"),
@@ -318,5 +320,6 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         files,
         qp,
         structure,
+        sensitivity_flops,
     })
 }
