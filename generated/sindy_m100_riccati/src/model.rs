@@ -332,6 +332,7 @@ pub fn continuous_sensitivity(
 }
 /// Structural non-zeros of every sensitivity S = ∂x/∂(x₀, u) of the RK4 recursion (the
 /// generator's propagation of the Jacobian pattern; S = [A B] at the end of a sample).
+#[allow(dead_code)]
 pub const S_PATTERN: [[bool; NZ]; NX] = [
     [
         true, false, false, true, true, true, true, false, false, true, true, true,

@@ -76,11 +76,17 @@ impl QpChoice {
     /// riccati, `RICCATI_ITERATIONS` Riccati factorisations of N·(2 NX³ + 3 NX² NU) each. The
     /// cheaper one is chosen (the condensed one on a tie).
     pub fn resolve(self, nx: usize, nu: usize, n: usize) -> QpMethod {
+        self.resolve_for(&kernels::Structure::dense(nx, nu), n)
+    }
+
+    /// [`Self::resolve`] with the condensed solver's cost counted on the emitted kernels of a
+    /// model's structure ([`structured_qp_flops`]).
+    pub fn resolve_for(self, structure: &kernels::Structure, n: usize) -> QpMethod {
         match self {
             QpChoice::Condensed => QpMethod::Condensed,
             QpChoice::Riccati => QpMethod::Riccati,
             QpChoice::Auto => {
-                let (condensed, riccati) = qp_flops(nx, nu, n);
+                let (condensed, riccati) = structured_qp_flops(structure, n);
                 if riccati < condensed {
                     QpMethod::Riccati
                 } else {
@@ -98,6 +104,17 @@ pub fn qp_flops(nx: usize, nu: usize, n: usize) -> (f64, f64) {
     let condensed = n * n / 2.0 * nu * nx * nx + nv * nv * nv / 6.0;
     let riccati = RICCATI_ITERATIONS * n * (2.0 * nx * nx * nx + 3.0 * nx * nx * nu);
     (condensed, riccati)
+}
+
+/// [`qp_flops`] with the condensed solver's work counted as the emitted code does it: the
+/// condensing kernels over the structural non-zeros and the Cholesky of H over its decoupled input
+/// components ([`kernels::Structure::flops`]). Riccati: the dense formula (its kernels are not
+/// specialised). With no structural zeros this is [`qp_flops`] up to the condensing's lower-order
+/// terms.
+pub fn structured_qp_flops(structure: &kernels::Structure, n: usize) -> (f64, f64) {
+    let (_, riccati) = qp_flops(structure.nx, structure.nu, n);
+    let f = structure.flops(n);
+    ((f.condensing + f.cholesky) as f64, riccati)
 }
 
 /// Interior-point iterations of a typical step, for the `--qp auto` rule (about the median
@@ -246,7 +263,8 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         }
         None => MpcOptions::defaults(model),
     };
-    let qp = options.qp.resolve(ir.nx, ir.nu, options.horizon);
+    let structure = kernels::Structure::from_ir(&ir, substeps, &mpc.q, &mpc.q_terminal);
+    let qp = options.qp.resolve_for(&structure, options.horizon);
     let head = header::lines(model, options, substeps, &mpc, qp);
     let rs_header = header::rust(&head);
 
@@ -255,7 +273,6 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         &lib_rs::dims_values(&ir, options, substeps, &mpc, &model.input_delays())?,
     )
     .map_err(GenerateError::Template)?;
-    let structure = kernels::Structure::from_ir(&ir, substeps, &mpc.q, &mpc.q_terminal);
     let (model_tokens, used_math, sensitivity_flops) = model_rs::emit(&ir, options.float, &structure.s)?;
     let mut files = vec![
         (

@@ -237,6 +237,7 @@ pub fn emit(
 
         /// Structural non-zeros of every sensitivity S = ∂x/∂(x₀, u) of the RK4 recursion (the
         /// generator's propagation of the Jacobian pattern; S = [A B] at the end of a sample).
+        #[allow(dead_code)] // what the two kernels below were specialised to
         pub const S_PATTERN: [[bool; NZ]; NX] = [#(#pattern_rows),*];
 
         /// Y = S + a D over `S_PATTERN` (outside it both are zero).
