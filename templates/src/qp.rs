@@ -329,20 +329,37 @@ impl<const NV: usize> BoxQp<NV> {
         Ok(())
     }
 
+    /// For each free position i, the first position of its component: L[i][..start[i]] is
+    /// exactly zero (`with_groups`), so the substitutions skip it.
+    fn row_starts(&self) -> [usize; NV] {
+        let nf = self.free_count();
+        let mut first = [nf; NV];
+        for i in (0..nf).rev() {
+            first[usize::from(self.group[self.var(i)]) % NV] = i;
+        }
+        let mut start = [0; NV];
+        for i in 0..nf {
+            start[i] = first[usize::from(self.group[self.var(i)]) % NV].min(i);
+        }
+        start
+    }
+
     /// Solve L Lᵀ y = b in place on `rhs[..nf]` (forward then backward substitution).
     fn solve_factored(&mut self) {
         let nf = self.free_count();
+        let start = self.row_starts();
         // L y = b
         for i in 0..nf {
             let row = &self.l[i];
-            self.rhs[i] = (self.rhs[i] - dot(&row[..i], &self.rhs[..i])) / row[i];
+            let s = start[i];
+            self.rhs[i] = (self.rhs[i] - dot(&row[s..i], &self.rhs[s..i])) / row[i];
         }
         // Lᵀ x = y, by columns of Lᵀ = rows of L
         for i in (0..nf).rev() {
             let xi = self.rhs[i] / self.l[i][i];
             self.rhs[i] = xi;
             let row = &self.l[i];
-            for k in 0..i {
+            for k in start[i]..i {
                 self.rhs[k] -= row[k] * xi;
             }
         }
@@ -356,10 +373,18 @@ impl<const NV: usize> BoxQp<NV> {
             return Err(QpStatus::NotPositiveDefinite);
         }
         let hv = &h[var];
-        // l = L⁻¹ c by forward substitution, built in `target`.
+        let start = self.row_starts();
+        let gv = self.group[var];
+        // l = L⁻¹ c by forward substitution, built in `target` (exactly zero in the rows of
+        // other components).
         for i in 0..nf {
+            if self.group[self.var(i)] != gv {
+                self.target[i] = 0.0;
+                continue;
+            }
             let row = &self.l[i];
-            self.target[i] = (hv[self.var(i)] - dot(&row[..i], &self.target[..i])) / row[i];
+            let s = start[i];
+            self.target[i] = (hv[self.var(i)] - dot(&row[s..i], &self.target[s..i])) / row[i];
         }
         let d = hv[var] - dot(&self.target[..nf], &self.target[..nf]);
         if !(d > PIVOT_TOLERANCE * hv[var].abs()) {
