@@ -82,6 +82,7 @@ pub struct Mpc {
 }
 
 /// Component of each QP variable (stage k, input r: `kernels::INPUT_COMPONENT[r]`).
+#[allow(clippy::modulo_one)] // NU = 1 in the template's example model
 const QP_GROUPS: [u8; NV] = {
     let mut groups = [0u8; NV];
     let mut i = 0;

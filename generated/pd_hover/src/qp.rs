@@ -251,9 +251,13 @@ impl<const NV: usize> BoxQp<NV> {
         let free = self.free;
         let var = |i: usize| free[i % NV].min(NV - 1);
         let group = self.group;
-        let mut first = [nf; NV];
-        for i in (0..nf).rev() {
-            first[usize::from(group[var(i)]) % NV] = i;
+        let grouped = self.groups > 1;
+        let mut first = [0; NV];
+        if grouped {
+            first = [nf; NV];
+            for i in (0..nf).rev() {
+                first[usize::from(group[var(i)]) % NV] = i;
+            }
         }
         for i in from..nf {
             if i >= NV {
@@ -293,7 +297,7 @@ impl<const NV: usize> BoxQp<NV> {
                 j += 4;
             }
             for j in j..=i {
-                if group[var(j)] != gi {
+                if grouped && group[var(j)] != gi {
                     self.l[i][j] = 0.0;
                     continue;
                 }
@@ -312,8 +316,12 @@ impl<const NV: usize> BoxQp<NV> {
     }
     /// For each free position i, the first position of its component: L[i][..start[i]] is
     /// exactly zero (`with_groups`), so the substitutions skip it.
-    fn row_starts(&self) -> [usize; NV] {
+    /// `None` for a single component (every start is 0).
+    fn row_starts(&self) -> Option<[usize; NV]> {
         let nf = self.free_count();
+        if self.groups <= 1 {
+            return None;
+        }
         let mut first = [nf; NV];
         for i in (0..nf).rev() {
             first[usize::from(self.group[self.var(i)]) % NV] = i;
@@ -322,7 +330,7 @@ impl<const NV: usize> BoxQp<NV> {
         for i in 0..nf {
             start[i] = first[usize::from(self.group[self.var(i)]) % NV].min(i);
         }
-        start
+        Some(start)
     }
     /// Solve L Lᵀ y = b in place on `rhs[..nf]` (forward then backward substitution).
     fn solve_factored(&mut self) {
@@ -330,14 +338,14 @@ impl<const NV: usize> BoxQp<NV> {
         let start = self.row_starts();
         for i in 0..nf {
             let row = &self.l[i];
-            let s = start[i];
+            let s = start.map_or(0, |st| st[i]);
             self.rhs[i] = (self.rhs[i] - dot(&row[s..i], &self.rhs[s..i])) / row[i];
         }
         for i in (0..nf).rev() {
             let xi = self.rhs[i] / self.l[i][i];
             self.rhs[i] = xi;
             let row = &self.l[i];
-            for k in start[i]..i {
+            for k in start.map_or(0, |st| st[i])..i {
                 self.rhs[k] -= row[k] * xi;
             }
         }
@@ -353,12 +361,12 @@ impl<const NV: usize> BoxQp<NV> {
         let start = self.row_starts();
         let gv = self.group[var];
         for i in 0..nf {
-            if self.group[self.var(i)] != gv {
+            if start.is_some() && self.group[self.var(i)] != gv {
                 self.target[i] = 0.0;
                 continue;
             }
             let row = &self.l[i];
-            let s = start[i];
+            let s = start.map_or(0, |st| st[i]);
             self.target[i] = (hv[self.var(i)] - dot(&row[s..i], &self.target[s..i]))
                 / row[i];
         }

@@ -81,6 +81,7 @@ pub struct Mpc {
     phase: Phase,
 }
 /// Component of each QP variable (stage k, input r: `kernels::INPUT_COMPONENT[r]`).
+#[allow(clippy::modulo_one)]
 const QP_GROUPS: [u8; NV] = {
     let mut groups = [0u8; NV];
     let mut i = 0;
