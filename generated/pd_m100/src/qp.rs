@@ -301,7 +301,8 @@ impl<const NV: usize> BoxQp<NV> {
                     self.l[i][j] = 0.0;
                     continue;
                 }
-                let s = hi[var(j)] - dot(&self.l[i][start..j], &self.l[j][start..j]);
+                let m = start.min(j);
+                let s = hi[var(j)] - dot(&self.l[i][m..j], &self.l[j][m..j]);
                 if j < i {
                     self.l[i][j] = s / self.l[j][j];
                 } else {
@@ -338,7 +339,7 @@ impl<const NV: usize> BoxQp<NV> {
         let start = self.row_starts();
         for i in 0..nf {
             let row = &self.l[i];
-            let s = start.map_or(0, |st| st[i]);
+            let s = start.map_or(0, |st| st[i]).min(i);
             self.rhs[i] = (self.rhs[i] - dot(&row[s..i], &self.rhs[s..i])) / row[i];
         }
         for i in (0..nf).rev() {
@@ -366,7 +367,7 @@ impl<const NV: usize> BoxQp<NV> {
                 continue;
             }
             let row = &self.l[i];
-            let s = start.map_or(0, |st| st[i]);
+            let s = start.map_or(0, |st| st[i]).min(i);
             self.target[i] = (hv[self.var(i)] - dot(&row[s..i], &self.target[s..i]))
                 / row[i];
         }
