@@ -339,14 +339,14 @@ impl<const NV: usize> BoxQp<NV> {
         let start = self.row_starts();
         for i in 0..nf {
             let row = &self.l[i];
-            let s = start.map_or(0, |st| st[i]).min(i);
+            let s = start.as_ref().map_or(0, |st| st[i]).min(i);
             self.rhs[i] = (self.rhs[i] - dot(&row[s..i], &self.rhs[s..i])) / row[i];
         }
         for i in (0..nf).rev() {
             let xi = self.rhs[i] / self.l[i][i];
             self.rhs[i] = xi;
             let row = &self.l[i];
-            for k in start.map_or(0, |st| st[i])..i {
+            for k in start.as_ref().map_or(0, |st| st[i])..i {
                 self.rhs[k] -= row[k] * xi;
             }
         }
@@ -367,7 +367,7 @@ impl<const NV: usize> BoxQp<NV> {
                 continue;
             }
             let row = &self.l[i];
-            let s = start.map_or(0, |st| st[i]).min(i);
+            let s = start.as_ref().map_or(0, |st| st[i]).min(i);
             self.target[i] = (hv[self.var(i)] - dot(&row[s..i], &self.target[s..i]))
                 / row[i];
         }
