@@ -135,7 +135,7 @@ impl Mpc {
             hi: [0.0; NV],
             v: [0.0; NV],
             z: [[0.0; NX]; N + 1],
-            qp: BoxQp::with_groups(QP_GROUPS),
+            qp: BoxQp::new(),
             phase: Phase::Stale,
         }
     }
@@ -262,6 +262,7 @@ impl Mpc {
     /// Factorise H_FF for the warm-start working set; if a pivot fails, add
     /// δI with growing δ. Some(regularised) on success, None if hopeless.
     fn factorize(&mut self) -> Option<bool> {
+        self.qp.ensure_groups(&QP_GROUPS);
         if self.qp.factorize(&self.h).is_ok() {
             return Some(false);
         }

@@ -64,7 +64,7 @@ pub struct BoxQp<const NV: usize> {
     /// H_ij = 0 exactly for variables of different components, so the factor of any H_FF has
     /// exact zeros between them, which the factorisation skips.
     group: [u8; NV],
-    /// Number of components (largest `group` + 1).
+    /// Number of components (largest `group` + 1; 0 before `ensure_groups`: one component).
     groups: u8,
 }
 impl<const NV: usize> Default for BoxQp<NV> {
@@ -128,7 +128,19 @@ const PIVOT_TOLERANCE: Real = 1e3 * Real::EPSILON;
 impl<const NV: usize> BoxQp<NV> {
     /// All variables free, nothing factorised.
     pub const fn new() -> Self {
-        Self::with_groups([0; NV])
+        let mut qp = Self::with_groups([0; NV]);
+        qp.groups = 0;
+        qp
+    }
+    /// Set the components once (see [`Self::with_groups`]): a no-op if they are set already.
+    /// Kept out of [`Self::new`] so that a new solver stays all zero bits (a static one then
+    /// lands in .bss, not in flash).
+    pub fn ensure_groups(&mut self, group: &[u8; NV]) {
+        if self.groups == 0 {
+            let with = Self::with_groups(*group);
+            self.group = with.group;
+            self.groups = with.groups;
+        }
     }
     /// Like [`Self::new`] for an H whose variables fall into components that never couple:
     /// H_ij = 0 (exactly) whenever `group[i] != group[j]`. Fresh factorisations order the free
@@ -192,7 +204,7 @@ impl<const NV: usize> BoxQp<NV> {
     /// Fails if a pivot is ≤ tolerance · H_ii (H not numerically positive definite).
     pub fn factorize(&mut self, h: &[[Real; NV]; NV]) -> Result<(), QpStatus> {
         self.nf = 0;
-        for g in 0..self.groups {
+        for g in 0..self.groups.max(1) {
             for k in 0..NV {
                 let i = if REVERSED_ORDER { NV - 1 - k } else { k };
                 if self.state[i] == Bound::Free && self.group[i] == g {
