@@ -391,10 +391,45 @@ fn check(args: CheckArgs) -> Result<(), String> {
         None => println!("  RK4 at {} Hz: {} substeps (given)", args.rate, generated.substeps),
     }
     println!(
-        "  generation: ok (crate `{}`, {} files, N = {})",
+        "  generation: ok (crate `{}`, {} files, N = {}, qp = {})",
         generated.crate_name,
         generated.files.len(),
-        options.horizon
+        options.horizon,
+        generated.qp.name()
+    );
+    let s = &generated.structure;
+    let (nza, nzb) = s.nonzeros();
+    let (after, dense) = (
+        s.flops(options.horizon),
+        uavgen::codegen::kernels::Structure::dense(s.nx, s.nu).flops(options.horizon),
+    );
+    let (lin, lin_dense) = generated
+        .sensitivity_flops
+        .per_step(options.horizon, generated.substeps);
+    println!(
+        "  linearisation: multiply-adds per RTI step of the emitted sensitivity kernels (∂f/∂x·S and the RK4 \
+         combinations, model evaluation not counted): {lin} (all columns {lin_dense})"
+    );
+    println!(
+        "  structure: A {nza} of {}, B {nzb} of {} structural non-zeros, input components {:?}; multiply-adds per RTI step of the emitted \
+         kernels (condensed QP): condensing {} (dense {}), feedback {} (dense {}), Cholesky of H with every input free {} (dense {}), total {} (dense {})",
+        s.nx * s.nx,
+        s.nx * s.nu,
+        s.input_components(),
+        after.condensing,
+        dense.condensing,
+        after.feedback,
+        dense.feedback,
+        after.cholesky,
+        dense.cholesky,
+        after.total(),
+        dense.total()
+    );
+    println!(
+        "  multiply-adds per RTI step without the QP's iterations (linearisation + condensing + feedback + Cholesky): \
+         {} (without the structural specialisation {})",
+        lin + after.total(),
+        lin_dense + dense.total()
     );
     Ok(())
 }

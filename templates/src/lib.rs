@@ -12,6 +12,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod dims;
+pub mod kernels;
 pub mod math;
 pub mod model;
 pub mod mpc;

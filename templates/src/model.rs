@@ -30,3 +30,36 @@ pub fn continuous_sensitivity(x: &[Real; NX], u: &[Real; NU], s: &[[Real; NZ]; N
     ds[1][NX] += B;
     (f, ds)
 }
+
+/// Structural non-zeros of every sensitivity S = ∂x/∂(x₀, u) of the RK4 recursion (the generator
+/// emits the model's; all true here: the dense reference).
+pub const S_PATTERN: [[bool; NZ]; NX] = [[true; NZ]; NX];
+
+/// Y = S + a D (over `S_PATTERN`; the generator emits straight-line code over the model's).
+#[inline(always)]
+pub fn sensitivity_axpy(s: &[[Real; NZ]; NX], a: Real, d: &[[Real; NZ]; NX]) -> [[Real; NZ]; NX] {
+    let mut y = *s;
+    for (yr, dr) in y.iter_mut().zip(d) {
+        for (yi, di) in yr.iter_mut().zip(dr) {
+            *yi += a * di;
+        }
+    }
+    y
+}
+
+/// S += c (D1 + 2 D2 + 2 D3 + D4) (over `S_PATTERN`).
+#[inline(always)]
+pub fn sensitivity_step(
+    s: &mut [[Real; NZ]; NX],
+    c: Real,
+    d1: &[[Real; NZ]; NX],
+    d2: &[[Real; NZ]; NX],
+    d3: &[[Real; NZ]; NX],
+    d4: &[[Real; NZ]; NX],
+) {
+    for i in 0..NX {
+        for j in 0..NZ {
+            s[i][j] += c * (d1[i][j] + 2.0 * d2[i][j] + 2.0 * d3[i][j] + d4[i][j]);
+        }
+    }
+}

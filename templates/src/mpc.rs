@@ -2,6 +2,7 @@
 //! multiple-shooting NLP, condensed into a dense box QP in the N·NU inputs.
 //! The algorithm and its notation are those of docs/mpc.md.
 
+use crate::kernels;
 use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization};
@@ -80,6 +81,18 @@ pub struct Mpc {
     qp: BoxQp<NV>,
     phase: Phase,
 }
+
+/// Component of each QP variable (stage k, input r: `kernels::INPUT_COMPONENT[r]`).
+#[allow(clippy::modulo_one)] // NU = 1 in the template's example model
+const QP_GROUPS: [u8; NV] = {
+    let mut groups = [0u8; NV];
+    let mut i = 0;
+    while i < NV {
+        groups[i] = kernels::INPUT_COMPONENT[i % NU];
+        i += 1;
+    }
+    groups
+};
 
 impl Default for Mpc {
     fn default() -> Self {
@@ -243,85 +256,31 @@ impl Mpc {
         for i in (0..N).rev() {
             let bi = &self.b[i];
             // M = Bᵢᵀ P
-            let mut m = [[0.0; NX]; NU];
-            for k in 0..NX {
-                let prow = &p[k];
-                for r in 0..NU {
-                    let bkr = bi[k][r];
-                    for c in 0..NX {
-                        m[r][c] += bkr * prow[c];
-                    }
-                }
-            }
+            let m = kernels::bt_p(bi, &p);
             // H_ii = M Bᵢ + R + δI
+            let mut hii = kernels::e_b(&m, bi);
             for r in 0..NU {
-                let mut s = [0.0; NU];
-                for k in 0..NX {
-                    let mrk = m[r][k];
-                    for c in 0..NU {
-                        s[c] += mrk * bi[k][c];
-                    }
-                }
-                s[r] += R[r] + REGULARISATION;
-                self.h[i * NU + r][i * NU..(i + 1) * NU].copy_from_slice(&s);
+                hii[r][r] += R[r] + REGULARISATION;
+                self.h[i * NU + r][i * NU..(i + 1) * NU].copy_from_slice(&hii[r]);
             }
             // E = M Aᵢ ⋯ A_{j+1}, H_ij = E B_j and H_ji = H_ijᵀ
             let mut e = m;
             for j in (0..i).rev() {
-                let a = &self.a[j + 1];
-                let mut next = [[0.0; NX]; NU];
+                e = kernels::e_a(&e, &self.a[j + 1]);
+                let hij = kernels::e_b(&e, &self.b[j]);
                 for r in 0..NU {
-                    for k in 0..NX {
-                        let erk = e[r][k];
-                        let arow = &a[k];
-                        for c in 0..NX {
-                            next[r][c] += erk * arow[c];
-                        }
-                    }
-                }
-                e = next;
-                let bj = &self.b[j];
-                for r in 0..NU {
-                    let mut s = [0.0; NU];
-                    for k in 0..NX {
-                        let erk = e[r][k];
-                        for c in 0..NU {
-                            s[c] += erk * bj[k][c];
-                        }
-                    }
-                    self.h[i * NU + r][j * NU..(j + 1) * NU].copy_from_slice(&s);
+                    self.h[i * NU + r][j * NU..(j + 1) * NU].copy_from_slice(&hij[r]);
                     for c in 0..NU {
-                        self.h[j * NU + c][i * NU + r] = s[c];
+                        self.h[j * NU + c][i * NU + r] = hij[r][c];
                     }
                 }
             }
             if i > 0 {
                 // Pᵢ = Q + Aᵢᵀ (P Aᵢ)
-                let a = &self.a[i];
-                let mut t = [[0.0; NX]; NX];
+                p = kernels::at_p_a(&p, &self.a[i]);
                 for r in 0..NX {
-                    for k in 0..NX {
-                        let prk = p[r][k];
-                        let arow = &a[k];
-                        for c in 0..NX {
-                            t[r][c] += prk * arow[c];
-                        }
-                    }
+                    p[r][r] += Q[r];
                 }
-                let mut next = [[0.0; NX]; NX];
-                for k in 0..NX {
-                    let trow = &t[k];
-                    for r in 0..NX {
-                        let akr = a[k][r];
-                        for c in 0..NX {
-                            next[r][c] += akr * trow[c];
-                        }
-                    }
-                }
-                for r in 0..NX {
-                    next[r][r] += Q[r];
-                }
-                p = next;
             }
         }
     }
@@ -329,6 +288,8 @@ impl Mpc {
     /// Factorise H_FF for the warm-start working set; if a pivot fails, add
     /// δI with growing δ. Some(regularised) on success, None if hopeless.
     fn factorize(&mut self) -> Option<bool> {
+        // The QP's components are set here, not in `new`, which stays all zero bits (.bss).
+        self.qp.ensure_groups(&QP_GROUPS);
         if self.qp.factorize(&self.h).is_ok() {
             return Some(false);
         }
@@ -418,14 +379,7 @@ impl Mpc {
             self.z[0][i] = x0[i] - self.xs[0][i];
         }
         for k in 0..N {
-            let (a, zk) = (&self.a[k], self.z[k]);
-            for i in 0..NX {
-                let mut s = self.c[k][i];
-                for j in 0..NX {
-                    s += a[i][j] * zk[j];
-                }
-                self.z[k + 1][i] = s;
-            }
+            self.z[k + 1] = kernels::a_x_add(&self.a[k], &self.z[k], &self.c[k]);
         }
         // Adjoint: p_N = Q_N e_N, g_j = B_jᵀ p_{j+1} + R ū_j, p_j = Q e_j + A_jᵀ p_{j+1}
         let mut p = [0.0; NX];
@@ -433,23 +387,14 @@ impl Mpc {
             p[i] = Q_TERMINAL[i] * (self.xs[N][i] + self.z[N][i] - self.reference[N][i]);
         }
         for j in (0..N).rev() {
-            let b = &self.b[j];
+            let mut ru = [0.0; NU];
             for r in 0..NU {
-                let mut s = R[r] * self.us[j][r];
-                for k in 0..NX {
-                    s += b[k][r] * p[k];
-                }
-                self.g[j * NU + r] = s;
+                ru[r] = R[r] * self.us[j][r];
             }
+            let gj = kernels::bt_x_add(&self.b[j], &p, &ru);
+            self.g[j * NU..(j + 1) * NU].copy_from_slice(&gj);
             if j > 0 {
-                let a = &self.a[j];
-                let mut next = [0.0; NX];
-                for k in 0..NX {
-                    let pk = p[k];
-                    for i in 0..NX {
-                        next[i] += a[k][i] * pk;
-                    }
-                }
+                let mut next = kernels::at_x(&self.a[j], &p);
                 for i in 0..NX {
                     next[i] += Q[i] * (self.xs[j][i] + self.z[j][i] - self.reference[j][i]);
                 }
@@ -490,16 +435,9 @@ impl Mpc {
         self.xs[0] = *x0;
         let mut dx = self.z[0];
         for k in 0..N {
-            let (a, b) = (&self.a[k], &self.b[k]);
-            let mut next = self.c[k];
-            for i in 0..NX {
-                for j in 0..NX {
-                    next[i] += a[i][j] * dx[j];
-                }
-                for j in 0..NU {
-                    next[i] += b[i][j] * self.v[k * NU + j];
-                }
-            }
+            let mut vk = [0.0; NU];
+            vk.copy_from_slice(&self.v[k * NU..(k + 1) * NU]);
+            let next = kernels::b_x_add(&self.b[k], &vk, &kernels::a_x_add(&self.a[k], &dx, &self.c[k]));
             let mut u = [0.0; NU];
             for j in 0..NU {
                 u[j] = self.us[k][j] + self.v[k * NU + j];

@@ -1,6 +1,6 @@
 //! Explicit RK4 with `SUBSTEPS` substeps per sample and forward sensitivities.
 
-use crate::model::{continuous_dynamics, continuous_sensitivity};
+use crate::model::{continuous_dynamics, continuous_sensitivity, sensitivity_axpy, sensitivity_step};
 use crate::{Real, DT, NU, NX, NZ, SUBSTEPS};
 
 /// Substep length h = DT / M.
@@ -12,18 +12,6 @@ fn axpy(x: &[Real; NX], a: Real, k: &[Real; NX]) -> [Real; NX] {
     let mut y = *x;
     for (yi, ki) in y.iter_mut().zip(k) {
         *yi += a * ki;
-    }
-    y
-}
-
-/// Y = S + a D (row by row)
-#[inline]
-fn axpy_rows(s: &[[Real; NZ]; NX], a: Real, d: &[[Real; NZ]; NX]) -> [[Real; NZ]; NX] {
-    let mut y = *s;
-    for (yr, dr) in y.iter_mut().zip(d) {
-        for (yi, di) in yr.iter_mut().zip(dr) {
-            *yi += a * di;
-        }
     }
     y
 }
@@ -66,15 +54,13 @@ pub fn discrete_linearization(x: &[Real; NX], u: &[Real; NU]) -> ([Real; NX], [[
     }
     for _ in 0..SUBSTEPS {
         let (k1, d1) = continuous_sensitivity(&xk, u, &s);
-        let (k2, d2) = continuous_sensitivity(&axpy(&xk, 0.5 * H, &k1), u, &axpy_rows(&s, 0.5 * H, &d1));
-        let (k3, d3) = continuous_sensitivity(&axpy(&xk, 0.5 * H, &k2), u, &axpy_rows(&s, 0.5 * H, &d2));
-        let (k4, d4) = continuous_sensitivity(&axpy(&xk, H, &k3), u, &axpy_rows(&s, H, &d3));
+        let (k2, d2) = continuous_sensitivity(&axpy(&xk, 0.5 * H, &k1), u, &sensitivity_axpy(&s, 0.5 * H, &d1));
+        let (k3, d3) = continuous_sensitivity(&axpy(&xk, 0.5 * H, &k2), u, &sensitivity_axpy(&s, 0.5 * H, &d2));
+        let (k4, d4) = continuous_sensitivity(&axpy(&xk, H, &k3), u, &sensitivity_axpy(&s, H, &d3));
         for i in 0..NX {
             xk[i] += H / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            for j in 0..NZ {
-                s[i][j] += H / 6.0 * (d1[i][j] + 2.0 * d2[i][j] + 2.0 * d3[i][j] + d4[i][j]);
-            }
         }
+        sensitivity_step(&mut s, H / 6.0, &d1, &d2, &d3, &d4);
     }
     let mut a = [[0.0; NX]; NX];
     let mut b = [[0.0; NU]; NX];

@@ -20,6 +20,9 @@ mod math;
 mod model;
 #[rustfmt::skip]
 mod mpc;
+/// Products with the stage matrices, specialised to their structural non-zeros.
+#[rustfmt::skip]
+pub mod kernels;
 #[rustfmt::skip]
 mod qp;
 #[rustfmt::skip]

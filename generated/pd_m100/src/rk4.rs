@@ -3,7 +3,9 @@
 // options: horizon=30 rate=30 Hz substeps=1 (auto) float=f64 qp=condensed (auto)
 // mpc: q=[2.0, 2.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] q_terminal=[2.0, 2.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] r=[0.1, 0.1, 0.1, 10.0] u_min=[-5.0, -0.611, -0.611, -2.6179938779914944] u_max=[5.0, 0.611, 0.611, 2.6179938779914944] max_qp_iterations=200 max_ipm_iterations=30 regularisation=1e-9
 //! Explicit RK4 with `SUBSTEPS` substeps per sample and forward sensitivities.
-use crate::model::{continuous_dynamics, continuous_sensitivity};
+use crate::model::{
+    continuous_dynamics, continuous_sensitivity, sensitivity_axpy, sensitivity_step,
+};
 use crate::{Real, DT, NU, NX, NZ, SUBSTEPS};
 /// Substep length h = DT / M.
 pub const H: Real = DT / SUBSTEPS as Real;
@@ -13,17 +15,6 @@ fn axpy(x: &[Real; NX], a: Real, k: &[Real; NX]) -> [Real; NX] {
     let mut y = *x;
     for (yi, ki) in y.iter_mut().zip(k) {
         *yi += a * ki;
-    }
-    y
-}
-/// Y = S + a D (row by row)
-#[inline]
-fn axpy_rows(s: &[[Real; NZ]; NX], a: Real, d: &[[Real; NZ]; NX]) -> [[Real; NZ]; NX] {
-    let mut y = *s;
-    for (yr, dr) in y.iter_mut().zip(d) {
-        for (yi, di) in yr.iter_mut().zip(dr) {
-            *yi += a * di;
-        }
     }
     y
 }
@@ -69,25 +60,22 @@ pub fn discrete_linearization(
         let (k2, d2) = continuous_sensitivity(
             &axpy(&xk, 0.5 * H, &k1),
             u,
-            &axpy_rows(&s, 0.5 * H, &d1),
+            &sensitivity_axpy(&s, 0.5 * H, &d1),
         );
         let (k3, d3) = continuous_sensitivity(
             &axpy(&xk, 0.5 * H, &k2),
             u,
-            &axpy_rows(&s, 0.5 * H, &d2),
+            &sensitivity_axpy(&s, 0.5 * H, &d2),
         );
         let (k4, d4) = continuous_sensitivity(
             &axpy(&xk, H, &k3),
             u,
-            &axpy_rows(&s, H, &d3),
+            &sensitivity_axpy(&s, H, &d3),
         );
         for i in 0..NX {
             xk[i] += H / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            for j in 0..NZ {
-                s[i][j]
-                    += H / 6.0 * (d1[i][j] + 2.0 * d2[i][j] + 2.0 * d3[i][j] + d4[i][j]);
-            }
         }
+        sensitivity_step(&mut s, H / 6.0, &d1, &d2, &d3, &d4);
     }
     let mut a = [[0.0; NX]; NX];
     let mut b = [[0.0; NU]; NX];

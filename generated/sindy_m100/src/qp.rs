@@ -60,6 +60,12 @@ pub struct BoxQp<const NV: usize> {
     /// kept up to date as variables are fixed and freed.
     fixed_gradient: [Real; NV],
     work: [Real; NV],
+    /// Component of each variable in H's coupling graph (`with_groups`; all 0: one component).
+    /// H_ij = 0 exactly for variables of different components, so the factor of any H_FF has
+    /// exact zeros between them, which the factorisation skips.
+    group: [u8; NV],
+    /// Number of components (largest `group` + 1; 0 before `ensure_groups`: one component).
+    groups: u8,
 }
 impl<const NV: usize> Default for BoxQp<NV> {
     fn default() -> Self {
@@ -122,6 +128,33 @@ const PIVOT_TOLERANCE: Real = 1e3 * Real::EPSILON;
 impl<const NV: usize> BoxQp<NV> {
     /// All variables free, nothing factorised.
     pub const fn new() -> Self {
+        let mut qp = Self::with_groups([0; NV]);
+        qp.groups = 0;
+        qp
+    }
+    /// Set the components once (see [`Self::with_groups`]): a no-op if they are set already.
+    /// Kept out of [`Self::new`] so that a new solver stays all zero bits (a static one then
+    /// lands in .bss, not in flash).
+    pub fn ensure_groups(&mut self, group: &[u8; NV]) {
+        if self.groups == 0 {
+            let with = Self::with_groups(*group);
+            self.group = with.group;
+            self.groups = with.groups;
+        }
+    }
+    /// Like [`Self::new`] for an H whose variables fall into components that never couple:
+    /// H_ij = 0 (exactly) whenever `group[i] != group[j]`. Fresh factorisations order the free
+    /// variables by component (component 0 first), and the factorisation skips the exact zeros
+    /// of the factor between components.
+    pub const fn with_groups(group: [u8; NV]) -> Self {
+        let mut groups = 0u8;
+        let mut i = 0;
+        while i < NV {
+            if group[i] >= groups {
+                groups = group[i].saturating_add(1);
+            }
+            i += 1;
+        }
         Self {
             l: [[0.0; NV]; NV],
             free: [0; NV],
@@ -131,6 +164,8 @@ impl<const NV: usize> BoxQp<NV> {
             target: [0.0; NV],
             fixed_gradient: [0.0; NV],
             work: [0.0; NV],
+            group,
+            groups,
         }
     }
     /// Free variable number `i` (factor order), clamped so that indexing with
@@ -169,11 +204,13 @@ impl<const NV: usize> BoxQp<NV> {
     /// Fails if a pivot is ≤ tolerance · H_ii (H not numerically positive definite).
     pub fn factorize(&mut self, h: &[[Real; NV]; NV]) -> Result<(), QpStatus> {
         self.nf = 0;
-        for k in 0..NV {
-            let i = if REVERSED_ORDER { NV - 1 - k } else { k };
-            if self.state[i] == Bound::Free {
-                self.free[self.nf % NV] = i;
-                self.nf += 1;
+        for g in 0..self.groups.max(1) {
+            for k in 0..NV {
+                let i = if REVERSED_ORDER { NV - 1 - k } else { k };
+                if self.state[i] == Bound::Free && self.group[i] == g {
+                    self.free[self.nf % NV] = i;
+                    self.nf += 1;
+                }
             }
         }
         self.factor_rows(h, 0)
@@ -225,21 +262,36 @@ impl<const NV: usize> BoxQp<NV> {
         let nf = self.nf.min(NV);
         let free = self.free;
         let var = |i: usize| free[i % NV].min(NV - 1);
+        let group = self.group;
+        let grouped = self.groups > 1;
+        let mut first = [0; NV];
+        if grouped {
+            first = [nf; NV];
+            for i in (0..nf).rev() {
+                first[usize::from(group[var(i)]) % NV] = i;
+            }
+        }
         for i in from..nf {
             if i >= NV {
                 break;
             }
             let hi = &h[var(i)];
-            let mut j = 0;
+            let gi = group[var(i)];
+            let start = first[usize::from(gi) % NV].min(i);
+            for x in self.l[i][..start].iter_mut() {
+                *x = 0.0;
+            }
+            let mut j = start;
             while j + 4 <= i {
                 let (head, tail) = self.l.split_at_mut(i);
                 let (Some(li), Some(rows)) = (tail.first_mut(), head.get(j..j + 4)) else {
                     break;
                 };
                 let n = j.min(NV);
+                let m = start.min(n);
                 let d = dot4(
-                    &li[..n],
-                    [&rows[0][..n], &rows[1][..n], &rows[2][..n], &rows[3][..n]],
+                    &li[m..n],
+                    [&rows[0][m..n], &rows[1][m..n], &rows[2][m..n], &rows[3][m..n]],
                 );
                 for c in 0..4 {
                     let lj = &rows[c];
@@ -257,7 +309,12 @@ impl<const NV: usize> BoxQp<NV> {
                 j += 4;
             }
             for j in j..=i {
-                let s = hi[var(j)] - dot(&self.l[i][..j], &self.l[j][..j]);
+                if grouped && group[var(j)] != gi {
+                    self.l[i][j] = 0.0;
+                    continue;
+                }
+                let m = start.min(j);
+                let s = hi[var(j)] - dot(&self.l[i][m..j], &self.l[j][m..j]);
                 if j < i {
                     self.l[i][j] = s / self.l[j][j];
                 } else {
@@ -270,18 +327,38 @@ impl<const NV: usize> BoxQp<NV> {
         }
         Ok(())
     }
+    /// For each free position i, the first position of its component: L[i][..start[i]] is
+    /// exactly zero (`with_groups`), so the substitutions skip it.
+    /// `None` for a single component (every start is 0).
+    fn row_starts(&self) -> Option<[usize; NV]> {
+        let nf = self.free_count();
+        if self.groups <= 1 {
+            return None;
+        }
+        let mut first = [nf; NV];
+        for i in (0..nf).rev() {
+            first[usize::from(self.group[self.var(i)]) % NV] = i;
+        }
+        let mut start = [0; NV];
+        for i in 0..nf {
+            start[i] = first[usize::from(self.group[self.var(i)]) % NV].min(i);
+        }
+        Some(start)
+    }
     /// Solve L Lᵀ y = b in place on `rhs[..nf]` (forward then backward substitution).
     fn solve_factored(&mut self) {
         let nf = self.free_count();
+        let start = self.row_starts();
         for i in 0..nf {
             let row = &self.l[i];
-            self.rhs[i] = (self.rhs[i] - dot(&row[..i], &self.rhs[..i])) / row[i];
+            let s = start.as_ref().map_or(0, |st| st[i]).min(i);
+            self.rhs[i] = (self.rhs[i] - dot(&row[s..i], &self.rhs[s..i])) / row[i];
         }
         for i in (0..nf).rev() {
             let xi = self.rhs[i] / self.l[i][i];
             self.rhs[i] = xi;
             let row = &self.l[i];
-            for k in 0..i {
+            for k in start.as_ref().map_or(0, |st| st[i])..i {
                 self.rhs[k] -= row[k] * xi;
             }
         }
@@ -294,9 +371,16 @@ impl<const NV: usize> BoxQp<NV> {
             return Err(QpStatus::NotPositiveDefinite);
         }
         let hv = &h[var];
+        let start = self.row_starts();
+        let gv = self.group[var];
         for i in 0..nf {
+            if start.is_some() && self.group[self.var(i)] != gv {
+                self.target[i] = 0.0;
+                continue;
+            }
             let row = &self.l[i];
-            self.target[i] = (hv[self.var(i)] - dot(&row[..i], &self.target[..i]))
+            let s = start.as_ref().map_or(0, |st| st[i]).min(i);
+            self.target[i] = (hv[self.var(i)] - dot(&row[s..i], &self.target[s..i]))
                 / row[i];
         }
         let d = hv[var] - dot(&self.target[..nf], &self.target[..nf]);

@@ -110,6 +110,9 @@ pub fn emit(model: &Model, ir: &ModelIr, qp: QpMethod) -> TokenStream {
     doc.push_str(&format!("\n\nQP solver: `{}` (`--qp`, docs/mpc.md).", qp.name()));
     let qp_module = match qp {
         QpMethod::Condensed => quote! {
+            /// Products with the stage matrices, specialised to their structural non-zeros.
+            #[rustfmt::skip]
+            pub mod kernels;
             #[rustfmt::skip]
             mod qp;
         },

@@ -3,9 +3,10 @@
 
 pub mod c_api;
 pub mod header;
+pub mod kernels;
 mod lib_rs;
 mod manifest;
-mod model_rs;
+pub mod model_rs;
 pub mod splice;
 pub mod write;
 
@@ -75,11 +76,17 @@ impl QpChoice {
     /// riccati, `RICCATI_ITERATIONS` Riccati factorisations of N·(2 NX³ + 3 NX² NU) each. The
     /// cheaper one is chosen (the condensed one on a tie).
     pub fn resolve(self, nx: usize, nu: usize, n: usize) -> QpMethod {
+        self.resolve_for(&kernels::Structure::dense(nx, nu), n)
+    }
+
+    /// [`Self::resolve`] with the condensed solver's cost counted on the emitted kernels of a
+    /// model's structure ([`structured_qp_flops`]).
+    pub fn resolve_for(self, structure: &kernels::Structure, n: usize) -> QpMethod {
         match self {
             QpChoice::Condensed => QpMethod::Condensed,
             QpChoice::Riccati => QpMethod::Riccati,
             QpChoice::Auto => {
-                let (condensed, riccati) = qp_flops(nx, nu, n);
+                let (condensed, riccati) = structured_qp_flops(structure, n);
                 if riccati < condensed {
                     QpMethod::Riccati
                 } else {
@@ -97,6 +104,17 @@ pub fn qp_flops(nx: usize, nu: usize, n: usize) -> (f64, f64) {
     let condensed = n * n / 2.0 * nu * nx * nx + nv * nv * nv / 6.0;
     let riccati = RICCATI_ITERATIONS * n * (2.0 * nx * nx * nx + 3.0 * nx * nx * nu);
     (condensed, riccati)
+}
+
+/// [`qp_flops`] with the condensed solver's work counted as the emitted code does it: the
+/// condensing kernels over the structural non-zeros and the Cholesky of H over its decoupled input
+/// components ([`kernels::Structure::flops`]). Riccati: the dense formula (its kernels are not
+/// specialised). With no structural zeros this is [`qp_flops`] up to the condensing's lower-order
+/// terms.
+pub fn structured_qp_flops(structure: &kernels::Structure, n: usize) -> (f64, f64) {
+    let (_, riccati) = qp_flops(structure.nx, structure.nu, n);
+    let f = structure.flops(n);
+    ((f.condensing + f.cholesky) as f64, riccati)
 }
 
 /// Interior-point iterations of a typical step, for the `--qp auto` rule (about the median
@@ -139,6 +157,12 @@ pub struct GeneratedCrate {
     pub substeps: usize,
     pub substep_choice: Option<SubstepChoice>,
     pub files: Vec<(PathBuf, String)>,
+    /// The QP solver the crate carries.
+    pub qp: QpMethod,
+    /// Structural patterns of its stage matrices (the emitted `kernels.rs` of a condensed crate).
+    pub structure: kernels::Structure,
+    /// Multiply-adds of the emitted sensitivity kernels (linearisation).
+    pub sensitivity_flops: model_rs::SensitivityFlops,
 }
 
 fn invalid(option: &'static str, message: impl Into<String>) -> GenerateError {
@@ -239,7 +263,8 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         }
         None => MpcOptions::defaults(model),
     };
-    let qp = options.qp.resolve(ir.nx, ir.nu, options.horizon);
+    let structure = kernels::Structure::from_ir(&ir, substeps, &mpc.q, &mpc.q_terminal);
+    let qp = options.qp.resolve_for(&structure, options.horizon);
     let head = header::lines(model, options, substeps, &mpc, qp);
     let rs_header = header::rust(&head);
 
@@ -255,7 +280,7 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         )?,
     )
     .map_err(GenerateError::Template)?;
-    let (model_tokens, used_math) = model_rs::emit(&ir, options.float)?;
+    let (model_tokens, used_math, sensitivity_flops) = model_rs::emit(&ir, options.float, &structure.s)?;
     let mut files = vec![
         (
             PathBuf::from("Cargo.toml"),
@@ -295,6 +320,12 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
             rs_header.clone() + &prettyplease::unparse(&splice::template(source)),
         ));
     }
+    if qp == QpMethod::Condensed {
+        files.push((
+            PathBuf::from("src/kernels.rs"),
+            rs_header.clone() + &format_file(structure.emit(options.horizon), "kernels.rs")?,
+        ));
+    }
     if options.c_api {
         let api = c_api::CApi {
             crate_name: &crate_name,
@@ -311,5 +342,8 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         substeps,
         substep_choice,
         files,
+        qp,
+        structure,
+        sensitivity_flops,
     })
 }

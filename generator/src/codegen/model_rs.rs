@@ -53,8 +53,40 @@ fn index(i: usize) -> proc_macro2::Literal {
     proc_macro2::Literal::usize_unsuffixed(i)
 }
 
-/// The whole `model.rs` as tokens, and the math functions it calls.
-pub fn emit(ir: &ModelIr, float: Float) -> Result<(TokenStream, BTreeSet<&'static str>), NonFiniteConstant> {
+/// Multiply-adds of one `continuous_sensitivity` call (∂f/∂x · S, a coefficient-one term and a
+/// copied row count as their additions, 0 for a copy) and of the RK4 sensitivity updates of one
+/// substep (3 `sensitivity_axpy`, 4 per entry in `sensitivity_step`), as emitted (`after`) and
+/// over all NZ columns (`dense`, the code before the columns were specialised).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SensitivityFlops {
+    pub stage: usize,
+    pub stage_dense: usize,
+    pub combine: usize,
+    pub combine_dense: usize,
+}
+
+impl SensitivityFlops {
+    /// Per RTI step: N samples × `substeps` × (4 stages + the combinations).
+    pub fn per_step(&self, horizon: usize, substeps: usize) -> (usize, usize) {
+        let n = horizon * substeps;
+        (
+            n * (4 * self.stage + self.combine),
+            n * (4 * self.stage_dense + self.combine_dense),
+        )
+    }
+}
+
+/// The whole `model.rs` as tokens, the math functions it calls and the multiply-adds of its
+/// sensitivity kernels. `s_pattern` (NX × NZ): the structural non-zeros of every sensitivity
+/// S = ∂x/∂(x₀, u) the RK4 recursion forms ([`super::kernels::Structure::s`]); the emitted
+/// sensitivity code computes and combines only those columns.
+pub fn emit(
+    ir: &ModelIr,
+    float: Float,
+    s_pattern: &[Vec<bool>],
+) -> Result<(TokenStream, BTreeSet<&'static str>, SensitivityFlops), NonFiniteConstant> {
+    let nz_count = ir.nx + ir.nu;
+    let mut flops = SensitivityFlops::default();
     let g = &ir.graph;
     let (binding, vars) = bind_variables(ir);
 
@@ -102,19 +134,33 @@ pub fn emit(ir: &ModelIr, float: Float) -> Result<(TokenStream, BTreeSet<&'stati
                 quote!(ds[#ii] = s[#k];)
             }
             _ => {
-                let terms: Vec<TokenStream> = nz
+                let atoms: Vec<(usize, Option<TokenStream>)> = nz
                     .iter()
-                    .map(|&(k, d)| {
-                        let k = index(k);
-                        if g.is_one(d) {
-                            quote!(s[#k][j])
-                        } else {
-                            let a = em.atom(d);
-                            quote!(#a * s[#k][j])
-                        }
-                    })
+                    .map(|&(k, d)| (k, if g.is_one(d) { None } else { Some(em.atom(d)) }))
                     .collect();
-                quote!(for j in 0..NZ { ds[#ii][j] = #(#terms)+*; })
+                flops.stage_dense += atoms.len() * nz_count;
+                // Only the columns S may have non-zero, and in each only the products whose
+                // S entry may be non-zero (in the order of the dense sum).
+                let mut stmts = Vec::new();
+                for j in (0..nz_count).filter(|&j| s_pattern[i][j]) {
+                    let jj = index(j);
+                    let terms: Vec<TokenStream> = atoms
+                        .iter()
+                        .filter(|(k, _)| s_pattern[*k][j])
+                        .map(|(k, a)| {
+                            let k = index(*k);
+                            match a {
+                                None => quote!(s[#k][#jj]),
+                                Some(a) => quote!(#a * s[#k][#jj]),
+                            }
+                        })
+                        .collect();
+                    flops.stage += terms.len();
+                    if !terms.is_empty() {
+                        stmts.push(quote!(ds[#ii][#jj] = #(#terms)+*;));
+                    }
+                }
+                quote!(#(#stmts)*)
             }
         };
         let mut extra = Vec::new();
@@ -123,12 +169,32 @@ pub fn emit(ir: &ModelIr, float: Float) -> Result<(TokenStream, BTreeSet<&'stati
                 let a = em.atom(d);
                 let col = index(ir.nx + m);
                 extra.push(quote!(ds[#ii][#col] += #a;));
+                flops.stage += 1;
+                flops.stage_dense += 1;
             }
         }
         rows.push(quote!(#row #(#extra)*));
     }
     em.check()?;
     let s_stmts = em.take_statements();
+    let entries: Vec<(proc_macro2::Literal, proc_macro2::Literal)> = (0..ir.nx)
+        .flat_map(|i| {
+            (0..nz_count)
+                .filter(move |&j| s_pattern[i][j])
+                .map(move |j| (index(i), index(j)))
+        })
+        .collect();
+    flops.combine = 7 * entries.len();
+    flops.combine_dense = 7 * ir.nx * nz_count;
+    let axpy: Vec<TokenStream> = entries
+        .iter()
+        .map(|(i, j)| quote!(y[#i][#j] += a * d[#i][#j];))
+        .collect();
+    let step: Vec<TokenStream> = entries
+        .iter()
+        .map(|(i, j)| quote!(s[#i][#j] += c * (d1[#i][#j] + 2.0 * d2[#i][#j] + 2.0 * d3[#i][#j] + d4[#i][#j]);))
+        .collect();
+    let pattern_rows = s_pattern.iter().map(|row| quote!([#(#row),*]));
     used.extend(em.used_functions());
     let imports = math_imports(&used);
     let state_list = ir.state_names.join(", ");
@@ -168,6 +234,32 @@ pub fn emit(ir: &ModelIr, float: Float) -> Result<(TokenStream, BTreeSet<&'stati
             #(#rows)*
             (f, ds)
         }
+
+        /// Structural non-zeros of every sensitivity S = ∂x/∂(x₀, u) of the RK4 recursion (the
+        /// generator's propagation of the Jacobian pattern; S = [A B] at the end of a sample).
+        #[allow(dead_code)] // what the two kernels below were specialised to
+        pub const S_PATTERN: [[bool; NZ]; NX] = [#(#pattern_rows),*];
+
+        /// Y = S + a D over `S_PATTERN` (outside it both are zero).
+        #[inline(always)]
+        pub fn sensitivity_axpy(s: &[[Real; NZ]; NX], a: Real, d: &[[Real; NZ]; NX]) -> [[Real; NZ]; NX] {
+            let mut y = *s;
+            #(#axpy)*
+            y
+        }
+
+        /// S += c (D1 + 2 D2 + 2 D3 + D4) over `S_PATTERN`.
+        #[inline(always)]
+        pub fn sensitivity_step(
+            s: &mut [[Real; NZ]; NX],
+            c: Real,
+            d1: &[[Real; NZ]; NX],
+            d2: &[[Real; NZ]; NX],
+            d3: &[[Real; NZ]; NX],
+            d4: &[[Real; NZ]; NX],
+        ) {
+            #(#step)*
+        }
     };
-    Ok((tokens, used))
+    Ok((tokens, used, flops))
 }

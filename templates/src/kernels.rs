@@ -1,0 +1,139 @@
+//! Products with the stage matrices Aₖ, Bₖ used by the condensing and the feedback of `mpc.rs`.
+//!
+//! These are the dense reference kernels. The generator replaces this module by one emitted for
+//! the model (generator/src/codegen/kernels.rs): the same functions as straight-line code over
+//! the structural non-zeros of Aₖ, Bₖ and of the products the condensing forms (`A_PATTERN`,
+//! `B_PATTERN`, `P_PATTERN`, `E_PATTERN`; here all true), so a multiplication by a structural
+//! zero is never executed. Each entry is summed in the order of the loops below (ascending inner
+//! index), so for inputs that are zero outside the patterns the emitted kernels return the same
+//! numbers as these.
+
+use crate::{Real, NU, NX};
+
+/// Structural non-zeros of Aₖ = ∂F/∂x (all true: dense reference).
+pub const A_PATTERN: [[bool; NX]; NX] = [[true; NX]; NX];
+/// Structural non-zeros of Bₖ = ∂F/∂u.
+pub const B_PATTERN: [[bool; NU]; NX] = [[true; NU]; NX];
+/// Structural non-zeros of every Pᵢ of the condensing recursion (a superset closed under
+/// P ↦ Q + Aᵀ P A).
+pub const P_PATTERN: [[bool; NX]; NX] = [[true; NX]; NX];
+/// Structural non-zeros of every chain E = Bᵢᵀ Pᵢ₊₁ Aᵢ ⋯ A_{j+1} (closed under E ↦ E A).
+pub const E_PATTERN: [[bool; NX]; NU] = [[true; NX]; NU];
+
+/// Component of each input in the condensed Hessian's coupling graph: H has exact zeros between
+/// the inputs (of any stages) of different components. Numbered largest component first.
+pub const INPUT_COMPONENT: [u8; NU] = [0; NU];
+
+/// Bᵀ P (P with `P_PATTERN`).
+pub fn bt_p(b: &[[Real; NU]; NX], p: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
+    let mut m = [[0.0; NX]; NU];
+    for r in 0..NU {
+        for c in 0..NX {
+            let mut s = 0.0;
+            for k in 0..NX {
+                s += b[k][r] * p[k][c];
+            }
+            m[r][c] = s;
+        }
+    }
+    m
+}
+
+/// E B (E with `E_PATTERN`).
+pub fn e_b(e: &[[Real; NX]; NU], b: &[[Real; NU]; NX]) -> [[Real; NU]; NU] {
+    let mut out = [[0.0; NU]; NU];
+    for r in 0..NU {
+        for c in 0..NU {
+            let mut s = 0.0;
+            for k in 0..NX {
+                s += e[r][k] * b[k][c];
+            }
+            out[r][c] = s;
+        }
+    }
+    out
+}
+
+/// E A (E with `E_PATTERN`).
+pub fn e_a(e: &[[Real; NX]; NU], a: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
+    let mut out = [[0.0; NX]; NU];
+    for r in 0..NU {
+        for c in 0..NX {
+            let mut s = 0.0;
+            for k in 0..NX {
+                s += e[r][k] * a[k][c];
+            }
+            out[r][c] = s;
+        }
+    }
+    out
+}
+
+/// Aᵀ (P A) (P with `P_PATTERN`).
+pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
+    let mut t = [[0.0; NX]; NX];
+    for r in 0..NX {
+        for c in 0..NX {
+            let mut s = 0.0;
+            for k in 0..NX {
+                s += p[r][k] * a[k][c];
+            }
+            t[r][c] = s;
+        }
+    }
+    let mut out = [[0.0; NX]; NX];
+    for r in 0..NX {
+        for c in 0..NX {
+            let mut s = 0.0;
+            for k in 0..NX {
+                s += a[k][r] * t[k][c];
+            }
+            out[r][c] = s;
+        }
+    }
+    out
+}
+
+/// y + A x
+pub fn a_x_add(a: &[[Real; NX]; NX], x: &[Real; NX], y: &[Real; NX]) -> [Real; NX] {
+    let mut out = *y;
+    for i in 0..NX {
+        for j in 0..NX {
+            out[i] += a[i][j] * x[j];
+        }
+    }
+    out
+}
+
+/// y + B v
+pub fn b_x_add(b: &[[Real; NU]; NX], v: &[Real; NU], y: &[Real; NX]) -> [Real; NX] {
+    let mut out = *y;
+    for i in 0..NX {
+        for j in 0..NU {
+            out[i] += b[i][j] * v[j];
+        }
+    }
+    out
+}
+
+/// y + Bᵀ p
+pub fn bt_x_add(b: &[[Real; NU]; NX], p: &[Real; NX], y: &[Real; NU]) -> [Real; NU] {
+    let mut out = *y;
+    for r in 0..NU {
+        for k in 0..NX {
+            out[r] += b[k][r] * p[k];
+        }
+    }
+    out
+}
+
+/// Aᵀ p
+pub fn at_x(a: &[[Real; NX]; NX], p: &[Real; NX]) -> [Real; NX] {
+    let mut out = [0.0; NX];
+    for i in 0..NX {
+        for k in 0..NX {
+            out[i] += a[k][i] * p[k];
+        }
+    }
+    out
+}
