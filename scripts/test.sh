@@ -3,7 +3,8 @@
 #  1. installs what the tests need (the thumbv7em target, clippy, rustfmt);
 #  2. checks formatting and clippy;
 #  3. regenerates generated/ and fails if the checked-in crates differ;
-#  4. builds the no_std crates, the C ABI staticlib and the firmware example for thumbv7em-none-eabihf;
+#  4. builds the no_std crates, the C ABI staticlib and the firmware example for thumbv7em-none-eabihf
+#     (no panic path, empty .data);
 #  5. runs all unit, property, reference and CLI tests (release build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -65,6 +66,19 @@ if command -v llvm-nm >/dev/null; then
         fi
     done
     echo "no panic path linked into the firmware binaries"
+    # The solver's state lives in .bss (zeroed RAM): a non-empty .data would be copied from flash
+    # at start-up, i.e. the workspace stored twice (an emitted initialiser that is not all zeros).
+    if command -v llvm-size >/dev/null; then
+        for bin in sindy_m100 pd_hover_f32; do
+            elf=runtime/firmware-example/target/thumbv7em-none-eabihf/release/$bin
+            data=$(llvm-size -A "$elf" | awk '$1 == ".data" { print $2 }')
+            if [ "${data:-0}" != 0 ]; then
+                echo "$bin: .data is $data bytes (the solver's state belongs in .bss)" >&2
+                exit 1
+            fi
+            llvm-size -A "$elf" | awk -v b="$bin" '$1 == ".text" || $1 == ".bss" { printf "%s %s %s B  ", b, $1, $2 } END { print "" }'
+        done
+    fi
 else
     echo "llvm-nm not found: skipping the no-panic check of the firmware binaries"
 fi
