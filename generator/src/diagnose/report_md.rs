@@ -72,6 +72,17 @@ fn rmse_change(e: &EffectReport) -> String {
 
 pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
     let mut s = String::new();
+    header(&mut s, d);
+    where_section(&mut s, d);
+    which_section(&mut s, d);
+    responses_section(&mut s, d);
+    shrink_section(&mut s, d);
+    corrected_section(&mut s, d, plots);
+    s
+}
+
+/// Title, verdict (and the closed-loop warning), the model and the data.
+fn header(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "# Diagnosis of `{}` ({})\n", d.model.name, d.model.kind);
     let verdict = if d.verdict == ["none"] {
         "**none** — no catalogued effect explains the gap between the model and the data significantly".to_string()
@@ -107,7 +118,10 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
         )
     };
     let _ = writeln!(s, "- scored on: {held}\n");
+}
 
+/// "Where the model parts from the data": the residual analysis's findings.
+fn where_section(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "## Where the model parts from the data\n");
     match &d.where_report {
         Some(w) => {
@@ -127,7 +141,11 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
             let _ = writeln!(s, "(not analysed)\n");
         }
     }
+}
 
+/// "Which effect": every candidate's fit and score, why the best others were not named, the scanned
+/// channels left out.
+fn which_section(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "## Which effect\n");
     let _ = writeln!(
         s,
@@ -195,7 +213,10 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
         }
     }
     let _ = writeln!(s);
+}
 
+/// "How the command channels answer": step responses, corrected against base.
+fn responses_section(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(
         s,
         "## How the command channels answer\n\nStep responses from rest, the corrected model (every named effect) against \
@@ -206,7 +227,11 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
         let _ = writeln!(s, "- {}", t.sentence());
     }
     let _ = writeln!(s);
+}
 
+/// "How far the gap shrinks": per state and overall, before and after, one step and over the
+/// horizon.
+fn shrink_section(s: &mut String, d: &Diagnosis) {
     let sh = &d.shrink;
     let _ = writeln!(s, "## How far the gap shrinks ({})\n", sh.data);
     let with = if sh.effects.is_empty() {
@@ -270,7 +295,10 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
         sh.closed_loop.status,
         sh.closed_loop.note
     );
+}
 
+/// The corrections block, the notes and the plots.
+fn corrected_section(s: &mut String, d: &Diagnosis, plots: &[String]) {
     let _ = writeln!(s, "## The corrected model\n");
     let _ = writeln!(
         s,
@@ -291,5 +319,4 @@ pub(crate) fn markdown(d: &Diagnosis, plots: &[String]) -> String {
             let _ = writeln!(s, "- [{p}]({p})");
         }
     }
-    s
 }
