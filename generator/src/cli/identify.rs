@@ -218,32 +218,26 @@ fn round_s(v: f64) -> f64 {
 }
 
 /// Estimate the input response from the logs (`--input-delay auto`).
-fn estimate_response(
-    logs: &[uavgen::logs::FlightLog],
-    savgol: SavGol,
-    targets: Targets,
-) -> Result<response::ResponseEstimate, String> {
+/// The scan always works on the integral form (`h` = 0: no derivative window), whatever targets the
+/// fit uses (docs/sindy.md, "Targets").
+fn estimate_response(logs: &[uavgen::logs::FlightLog], savgol: SavGol) -> Result<response::ResponseEstimate, String> {
     let whole = build(
         logs,
         &DatasetOptions {
             savgol,
             trim_edges: false,
-            targets,
+            targets: Targets::Trapezoid,
             ..DatasetOptions::default()
         },
     )
     .map_err(|e| e.to_string())?;
-    let h = match targets {
-        Targets::SavGol => savgol.half_window(),
-        Targets::Trapezoid => 0,
-    };
     let segments: Vec<ScanSegment> = whole
         .segments
         .into_iter()
         .map(|s| ScanSegment {
             log: s.log,
             dt: s.dt,
-            h,
+            h: 0,
             x: s.x,
             u: s.u,
             dx: s.dx,
@@ -335,9 +329,8 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             eprintln!(
                 "estimating input delays and lags (--input-delay auto: delays 0..0.5 s, lags 0.02..0.8 s; held-out one-step error of the driven row, guarded by its loop's held-out free runs) ..."
             );
-            let est = super::progress::with_spinner("estimating input delays and lags", || {
-                estimate_response(&logs, savgol, Targets::Trapezoid)
-            })?;
+            let est =
+                super::progress::with_spinner("estimating input delays and lags", || estimate_response(&logs, savgol))?;
             eprintln!(
                 "  held out: {} {}; per channel: delay (Δχ² = 1 range), lag, one-step and loop free-run RMSE before -> after",
                 est.folds, est.fold_kind

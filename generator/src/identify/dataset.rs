@@ -162,22 +162,7 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
             };
             let (mut u, max_shift) = match &options.response {
                 Some(r) => (r.regressors(&seg.u, dt), r.warmup(dt)),
-                None => {
-                    // u_j(t − d_j): each channel shifted by its delay in samples.
-                    let shift: Vec<usize> = options
-                        .input_delay
-                        .iter()
-                        .map(|d| (d.max(0.0) / dt).round() as usize)
-                        .collect();
-                    let max_shift = shift.iter().copied().max().unwrap_or(0);
-                    let mut u = seg.u.clone();
-                    for k in (0..u.len()).rev() {
-                        for (j, &s) in shift.iter().enumerate() {
-                            u[k][j] = seg.u[k.saturating_sub(s)][j];
-                        }
-                    }
-                    (u, max_shift)
-                }
+                None => shifted_inputs(&seg.u, &options.input_delay, dt),
             };
             let mut dx = dx;
             if let Some(lp) = &options.lowpass {
@@ -221,6 +206,17 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
     Ok(Dataset { segments })
 }
 
+/// u_j(t − d_j): each channel shifted by its delay in whole samples (the first sample repeated
+/// before the segment), and the largest shift.
+fn shifted_inputs(u: &[[f64; 4]], delay: &[f64; 4], dt: f64) -> (Vec<[f64; 4]>, usize) {
+    let shift: [usize; 4] = core::array::from_fn(|j| (delay[j].max(0.0) / dt).round() as usize);
+    let max_shift = shift.iter().copied().max().unwrap_or(0);
+    let shifted = (0..u.len())
+        .map(|k| core::array::from_fn(|j| u[k.saturating_sub(shift[j])][j]))
+        .collect();
+    (shifted, max_shift)
+}
+
 /// One segment in the integral form ([`Targets::Trapezoid`]): sample k stands for the interval
 /// [t_k, t_{k+1}], its input is what the interval sees, its target the mean slope. `None` when
 /// the input delays leave no interval.
@@ -235,18 +231,7 @@ fn interval_segment(
 ) -> Option<SegmentData> {
     let (u, start) = match &options.response {
         Some(r) => (r.interval_inputs(u, dt), r.warmup(dt)),
-        None => {
-            let shift: Vec<usize> = options
-                .input_delay
-                .iter()
-                .map(|d| (d.max(0.0) / dt).round() as usize)
-                .collect();
-            let max_shift = shift.iter().copied().max().unwrap_or(0);
-            let shifted = (0..u.len())
-                .map(|k| core::array::from_fn(|j| u[k.saturating_sub(shift[j])][j]))
-                .collect();
-            (shifted, max_shift)
-        }
+        None => shifted_inputs(u, &options.input_delay, dt),
     };
     let end = t.len().saturating_sub(1);
     if start >= end {
