@@ -268,6 +268,9 @@ fn fly_all(
             report.feedback.max_us,
             report.inputs_out_of_bounds
         );
+        if let Some(w) = report.chatter_warning() {
+            println!("{}: warning: {w}", which.name());
+        }
         summary.push(report);
     }
     if several {

@@ -72,6 +72,41 @@ pub struct TrackReport {
     pub max_bound_excess: f64,
     /// Fraction of samples with an input at a bound (|u − bound| < 1e-9).
     pub saturated_fraction: f64,
+    /// Input activity over the second half, per input: mean |uₖ − uₖ₋₁| as a fraction of the
+    /// input's range u_max − u_min (docs/track.md "Chatter").
+    pub input_chatter: BTreeMap<String, f64>,
+    /// Whether an input chatters: its `input_chatter` is above [`CHATTER_LIMIT`].
+    pub chattering: bool,
+}
+
+/// An input whose mean change per sample over the second half exceeds this fraction of its range
+/// chatters. Smooth loops stay below 0.01 (a nominal-plant model flying that plant: 0.006 on
+/// roll); a loop that bangs between the bounds every other sample is near 1.
+pub const CHATTER_LIMIT: f64 = 0.10;
+
+/// The standard inputs' names (the samples CSV's columns), `u[j]` beyond them.
+fn input_name(j: usize) -> String {
+    ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"]
+        .get(j)
+        .map_or_else(|| format!("u[{j}]"), |n| n.to_string())
+}
+
+/// Mean |uₖ − uₖ₋₁| / (u_max − u_min) per input over `samples`.
+fn input_chatter(samples: &[TrackSample], bounds: &(Vec<f64>, Vec<f64>)) -> BTreeMap<String, f64> {
+    let steps = samples.len().saturating_sub(1).max(1) as f64;
+    (0..bounds.0.len())
+        .map(|j| {
+            let range = bounds.1[j] - bounds.0[j];
+            let total: f64 = samples
+                .windows(2)
+                .map(|w| {
+                    (w[1].answer.u.get(j).copied().unwrap_or(0.0) - w[0].answer.u.get(j).copied().unwrap_or(0.0)).abs()
+                })
+                .filter(|d| d.is_finite())
+                .sum();
+            (input_name(j), total / steps / range)
+        })
+        .collect()
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -138,6 +173,7 @@ impl TrackReport {
         let (per, all) = axis_metrics(samples);
         let (verdict, verdict_reason) = judge(flight.lost.as_ref().map(|(t, why)| (why.as_str(), *t)), all.rmse, rules);
         let (_, second) = axis_metrics(&samples[samples.len() / 2..]);
+        let chatter = input_chatter(&samples[samples.len() / 2..], bounds);
         let mut statuses = BTreeMap::new();
         let mut errors = BTreeMap::new();
         let (mut out, mut excess, mut saturated) = (0, 0.0f64, 0);
@@ -183,6 +219,8 @@ impl TrackReport {
             inputs_out_of_bounds: out,
             max_bound_excess: excess,
             saturated_fraction: saturated as f64 / samples.len().max(1) as f64,
+            chattering: chatter.values().any(|c| *c > CHATTER_LIMIT),
+            input_chatter: chatter,
         }
     }
 
@@ -233,7 +271,37 @@ impl TrackReport {
             self.max_bound_excess,
             100.0 * self.saturated_fraction
         );
+        s += &format!(
+            "\nInput activity over the second half (mean change per sample, share of the input's range): {}.{}\n",
+            self.input_chatter
+                .iter()
+                .map(|(k, v)| format!("{k} {:.1} %", 100.0 * v))
+                .collect::<Vec<_>>()
+                .join(", "),
+            match self.chatter_warning() {
+                Some(w) => format!(" **{w}**"),
+                None => String::new(),
+            }
+        );
         s
+    }
+
+    /// "the inputs chatter: …" when an input's activity is above [`CHATTER_LIMIT`].
+    pub fn chatter_warning(&self) -> Option<String> {
+        if !self.chattering {
+            return None;
+        }
+        let worst: Vec<String> = self
+            .input_chatter
+            .iter()
+            .filter(|(_, v)| **v > CHATTER_LIMIT)
+            .map(|(k, v)| format!("{k} moves {:.0} % of its range per sample", 100.0 * v))
+            .collect();
+        Some(format!(
+            "The inputs chatter ({}; limit {:.0} %): the loop holds the path with commands no aircraft should get — the model's loops, delays or the measurement noise do not match the plant's (docs/track.md \"Chatter\")",
+            worst.join(", "),
+            100.0 * CHATTER_LIMIT
+        ))
     }
 }
 
@@ -267,4 +335,43 @@ pub fn samples_csv(samples: &[TrackSample]) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::track::backend::StepAnswer;
+
+    fn sample(u: &[f64]) -> TrackSample {
+        TrackSample {
+            t: 0.0,
+            reference: [0.0; 3],
+            measured: [0.0; 12],
+            truth: [0.0; 12],
+            answer: StepAnswer {
+                u: u.to_vec(),
+                status: "Solved".into(),
+                qp_iterations: 1,
+                feedback_ns: 0.0,
+                prepare_ns: 0.0,
+                error: "-".into(),
+            },
+        }
+    }
+
+    #[test]
+    fn chatter_is_the_mean_change_per_sample_over_the_range() {
+        // Input 0 (range 2) alternates between its bounds: |Δu| = 2 every step, 100 % of the range.
+        // Input 1 (range 4) ramps by 0.2 per step: 5 %.
+        let samples: Vec<TrackSample> = (0..5)
+            .map(|k| sample(&[if k % 2 == 0 { -1.0 } else { 1.0 }, 0.2 * k as f64]))
+            .collect();
+        let bounds = (vec![-1.0, -2.0], vec![1.0, 2.0]);
+        let c = input_chatter(&samples, &bounds);
+        assert!((c["u_vz"] - 1.0).abs() < 1e-12, "{c:?}");
+        assert!((c["u_roll"] - 0.05).abs() < 1e-12, "{c:?}");
+        // One sample: no change, no division by zero.
+        let one = input_chatter(&samples[..1], &bounds);
+        assert_eq!(one["u_vz"], 0.0);
+    }
 }
