@@ -156,8 +156,11 @@ fn c_example_matches_the_rust_solver_over_900_steps() {
             max_diff = max_diff.max(d);
         }
     }
-    // The loop must have done something: inputs at their bounds early, the last waypoint reached.
-    assert!(rust.iter().any(|s| s.2[1] == U_MAX[1]));
+    // The loop must have done something: a tilt of 0.1 rad or more toward the first waypoint (0.6 m
+    // away; 0.16 rad with the default input-rate weight, the bound 0.611 without), the last
+    // waypoint reached.
+    let roll = rust.iter().map(|s| s.2[1].abs()).fold(0.0, Real::max);
+    assert!(roll >= 0.1, "largest |u_roll| {roll}");
     let r = reference_at(STEPS);
     let error = ((x[0] - r[0]).powi(2) + (x[1] - r[1]).powi(2) + (x[2] - r[2]).powi(2)).sqrt();
     assert!(error < 0.05, "final position error {error} m");

@@ -8,9 +8,12 @@ use uavgen::reference::{GenericMpc, MpcProblem, ReferenceError};
 use uavgen::MpcOptions;
 use uavgen_tests::{envelope_points, shipped_model, INPUT_BOUNDS, STATE_BOUNDS};
 
-fn generic(model: &str, dt: f64, substeps: usize, horizon: usize) -> GenericMpc {
+/// The generic solver for a shipped model with the default options, except the input-rate weights:
+/// the crate's own `R_DELTA` (0 for the stage-wise crate, generated with examples/mpc_no_rate.json).
+fn generic(model: &str, dt: f64, substeps: usize, horizon: usize, r_delta: &[f64]) -> GenericMpc {
     let m = shipped_model(model);
-    let options = MpcOptions::defaults(&m);
+    let mut options = MpcOptions::defaults(&m);
+    options.r_delta = r_delta.to_vec();
     GenericMpc::new(
         uavgen::ModelIr::new(&m),
         MpcProblem {
@@ -62,7 +65,7 @@ macro_rules! comparisons {
             #[test]
             fn one_rti_step_on_random_instances() {
                 let mut rng = ChaCha8Rng::seed_from_u64(2024);
-                let mut reference_solver = generic($model, DT, SUBSTEPS, N);
+                let mut reference_solver = generic($model, DT, SUBSTEPS, N, &$krate::R_DELTA);
                 let points = envelope_points(1000 * (N + 2), 5);
                 let mut worst: f64 = 0.0;
                 for instance in 0..1000 {
@@ -108,7 +111,7 @@ macro_rules! comparisons {
             fn closed_loops_on_the_paper_trajectories() {
                 for name in ["sinusoidal", "circular", "spiral"] {
                     let mut mpc = Mpc::new();
-                    let mut reference_solver = generic($model, DT, SUBSTEPS, N);
+                    let mut reference_solver = generic($model, DT, SUBSTEPS, N, &$krate::R_DELTA);
                     let mut x = [0.0; NX];
                     x[..3].copy_from_slice(&[3.0, 3.0, 5.0]);
                     let mut worst: f64 = 0.0;
@@ -173,7 +176,7 @@ macro_rules! comparisons {
                 let r = window("circular", 0.0);
                 let rv: Vec<Vec<f64>> = r.iter().map(|x| x.to_vec()).collect();
                 let mut mpc = Mpc::new();
-                let mut reference_solver = generic($model, DT, SUBSTEPS, N);
+                let mut reference_solver = generic($model, DT, SUBSTEPS, N, &$krate::R_DELTA);
                 let mut previous = *mpc.planned_inputs();
                 let mut converged_after = None;
                 for iteration in 1..=300 {
@@ -196,7 +199,7 @@ macro_rules! comparisons {
                 if $hovers {
                     let iterations = converged_after.unwrap_or_else(|| panic!("{}: SQP did not converge", $model));
                     // The generic full SQP reaches the same optimum on its own.
-                    let mut fresh = generic($model, DT, SUBSTEPS, N);
+                    let mut fresh = generic($model, DT, SUBSTEPS, N, &$krate::R_DELTA);
                     let (_, generic_iterations) = fresh.solve_to_convergence(&x0, &rv, 1e-10, 300).unwrap();
                     let d = max_plan_difference(mpc.planned_inputs(), fresh.planned_inputs());
                     assert!(d <= 1e-6, "{}: converged plans differ by {d:e}", $model);
@@ -220,17 +223,19 @@ macro_rules! comparisons {
                 let r = window("circular", 0.0);
                 mpc.solve(&x0, &r);
                 let plan = *mpc.planned_inputs();
+                // The input sent: each channel's plan at its lead (stage 0 without delays).
+                let sent: [f64; NU] = core::array::from_fn(|i| plan[$krate::INPUT_LEAD[i]][i]);
                 let mut bad = x0;
                 bad[4] = f64::NAN;
                 let s = mpc.solve(&bad, &r);
                 assert_eq!(s.status, Status::InvalidInput);
-                assert_eq!(s.u0, plan[0]);
+                assert_eq!(s.u0, sent);
                 assert_eq!(*mpc.planned_inputs(), plan);
                 let mut bad_r = r;
                 bad_r[N][0] = f64::INFINITY;
                 let s = mpc.solve(&x0, &bad_r);
                 assert_eq!(s.status, Status::InvalidInput);
-                assert_eq!(s.u0, plan[0]);
+                assert_eq!(s.u0, sent);
                 for i in 0..NU {
                     assert!(s.u0[i] >= $krate::U_MIN[i] && s.u0[i] <= $krate::U_MAX[i]);
                 }
@@ -356,7 +361,13 @@ macro_rules! f32_comparison {
         #[test]
         fn $name() {
             use $krate::{Mpc, DT, N, NU, NX, SUBSTEPS};
-            let mut reference_solver = generic("pd_hover", f64::from(DT), SUBSTEPS, N);
+            let mut reference_solver = generic(
+                "pd_hover",
+                f64::from(DT),
+                SUBSTEPS,
+                N,
+                &$krate::R_DELTA.map(f64::from),
+            );
             let mut worst: f64 = 0.0;
             for (instance, (x, _)) in envelope_points(200, 9).into_iter().enumerate() {
                 let mut x0 = [0.0f32; NX];

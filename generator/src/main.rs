@@ -125,13 +125,13 @@ struct GenerateArgs {
     /// QP solver of the generated crate: `condensed` (dense box QP in the N·NU inputs, primal
     /// active set), `riccati` (stage-wise primal-dual interior point, Riccati recursion, at most
     /// max_ipm_iterations iterations) or `auto` (the one whose fixed work per step is smaller in
-    /// flops, Riccati also when the condensed Hessian would not fit 64 KB; docs/mpc.md).
+    /// flops; always `condensed` when the options have an input-rate weight, which `riccati` refuses; docs/mpc.md).
     #[arg(long, value_enum, default_value_t = QpArg::Auto)]
     qp: QpArg,
     /// Regenerate even if --out, a crate uavgen generated, holds files uavgen did not write (they are deleted).
     #[arg(long)]
     force: bool,
-    /// MPC options file: weights, input bounds, QP limits (default: the paper's but q yaw 1, r u_yaw_rate 10; examples/mpc_paper.json has the paper's; see docs/mpc.md).
+    /// MPC options file: weights, input bounds, QP limits (default: the paper's but q yaw 1, r u_yaw_rate 10, input-rate weight r_delta 50 on u_roll and u_pitch; examples/mpc_paper.json has the paper's; see docs/mpc.md).
     #[arg(long)]
     mpc: Option<PathBuf>,
     /// Also emit a C ABI: include/<name>.h and the capi/ package (staticlib lib<name>_capi.a) for C/C++ flight stacks (docs/c-api.md).

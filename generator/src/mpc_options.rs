@@ -15,6 +15,7 @@ pub struct MpcOptionsFile {
     pub q: Option<Vec<f64>>,
     pub q_terminal: Option<Vec<f64>>,
     pub r: Option<Vec<f64>>,
+    pub r_delta: Option<Vec<f64>>,
     pub u_min: Option<Vec<f64>>,
     pub u_max: Option<Vec<f64>>,
     pub max_qp_iterations: Option<usize>,
@@ -31,6 +32,8 @@ pub struct MpcOptions {
     pub q_terminal: Vec<f64>,
     /// Input weights diag(R).
     pub r: Vec<f64>,
+    /// Input-rate weights diag(S) on uₖ − uₖ₋₁ (u₋₁ = the input sent last; docs/mpc.md).
+    pub r_delta: Vec<f64>,
     pub u_min: Vec<f64>,
     pub u_max: Vec<f64>,
     /// Hard cap on active-set iterations per QP (`--qp condensed`).
@@ -75,6 +78,23 @@ fn default_r(model: &Model) -> Vec<f64> {
         .collect()
 }
 
+/// Default input-rate weight (S on uₖ − uₖ₋₁): 50 on u_roll and u_pitch (by name), 0 on the others.
+///
+/// Without it every delay-aware model's closed loop on plants/m100_like.json holds the path with roll
+/// and pitch commands that swing across 20–80 % of their range every sample (docs/track.md
+/// "Chatter"): a model whose attitude loops are slower than the aircraft's, measurement noise and
+/// stale samples make the MPC's first input a high-gain feedback. S = 50 rad⁻² (a change of 0.1 rad
+/// in one sample costs as much as 0.35 m of position error for one sample under q = 2) brings every
+/// such loop below 1 % with the tracking RMSE within −0.04 … +0.01 m (docs/validation.md); 300
+/// slows the approach (the spiral 0.31–0.34 m), 5–20 leaves the shipped models' roll at 11–19 %.
+fn default_r_delta(model: &Model) -> Vec<f64> {
+    model
+        .inputs
+        .iter()
+        .map(|n| if n == "u_roll" || n == "u_pitch" { 50.0 } else { 0.0 })
+        .collect()
+}
+
 /// Default bound of an input by name (the paper's), ±1 for other names.
 fn default_bound(name: &str) -> f64 {
     match name {
@@ -94,6 +114,7 @@ impl MpcOptions {
             q_terminal: q.clone(),
             q,
             r: default_r(model),
+            r_delta: default_r_delta(model),
             u_min: model.inputs.iter().map(|n| -default_bound(n)).collect(),
             u_max: model.inputs.iter().map(|n| default_bound(n)).collect(),
             max_qp_iterations: 200,
@@ -141,9 +162,10 @@ impl MpcOptions {
         let q = vector("q", file.q, d.q, nx)?;
         let q_terminal = vector("q_terminal", file.q_terminal, q.clone(), nx)?;
         let r = vector("r", file.r, d.r, nu)?;
+        let r_delta = vector("r_delta", file.r_delta, d.r_delta, nu)?;
         let u_min = vector("u_min", file.u_min, d.u_min, nu)?;
         let u_max = vector("u_max", file.u_max, d.u_max, nu)?;
-        for (field, v) in [("q", &q), ("q_terminal", &q_terminal), ("r", &r)] {
+        for (field, v) in [("q", &q), ("q_terminal", &q_terminal), ("r", &r), ("r_delta", &r_delta)] {
             if let Some(i) = v.iter().position(|&x| x < 0.0) {
                 return Err(format!("{label}: {field}[{i}]: weights must be ≥ 0, found {}", v[i]));
             }
@@ -175,6 +197,7 @@ impl MpcOptions {
             q,
             q_terminal,
             r,
+            r_delta,
             u_min,
             u_max,
             max_qp_iterations,

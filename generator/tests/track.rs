@@ -449,20 +449,24 @@ fn max_distance_and_max_rmse_are_settable_and_checked() {
 
 #[test]
 fn chattering_inputs_are_reported() {
-    // pd_hover on the nominal plant flies the circle with smooth inputs; the shipped sindy_m100
-    // (identified on the real M100, whose roll and pitch loops are slower than the nominal
-    // plant's) holds the circle with roll and pitch commands that swing across much of their
-    // range every sample. Both are "tracked" by RMSE; only the second is flagged (a warning: the
+    // The shipped sindy_m100 (identified on the real M100, whose roll and pitch loops are slower
+    // than the nominal plant's) on the nominal plant: without the input-rate weight
+    // (examples/mpc_no_rate.json) it holds the circle with roll and pitch commands that swing
+    // across much of their range every sample; with the defaults (r_delta 50 on roll and pitch)
+    // its inputs are smooth. Both are "tracked" by RMSE; only the first is flagged (a warning: the
     // exit status stays that of the verdict).
     let tmp = tempfile::tempdir().unwrap();
     let work = tmp.path().join("work");
     let mut activity = Vec::new();
-    for model in ["pd_hover", "sindy_m100"] {
-        let out = tmp.path().join(model);
-        let o = uavgen(&[
+    for (label, options) in [
+        ("defaults", None),
+        ("no rate weight", Some("examples/mpc_no_rate.json")),
+    ] {
+        let out = tmp.path().join(label.replace(' ', "_"));
+        let mut args = vec![
             "track",
             "--model",
-            &format!("models/{model}.json"),
+            "models/sindy_m100.json",
             "--plant",
             "plants/nominal.json",
             "--trajectory",
@@ -475,8 +479,12 @@ fn chattering_inputs_are_reported() {
             out.to_str().unwrap(),
             "--work-dir",
             work.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{model}: {}", stderr(&o));
+        ];
+        if let Some(o) = options {
+            args.extend(["--mpc", o]);
+        }
+        let o = uavgen(&args);
+        assert!(o.status.success(), "{label}: {}", stderr(&o));
         let r = report(&out);
         let worst = r["input_chatter"]
             .as_object()
@@ -486,7 +494,7 @@ fn chattering_inputs_are_reported() {
             .fold(0.0, f64::max);
         let stdout = String::from_utf8_lossy(&o.stdout).to_string();
         let md = fs::read_to_string(out.join("report.md")).unwrap();
-        println!("{model}: largest input activity {worst:.3}");
+        println!("{label}: largest input activity {worst:.3}");
         activity.push((
             r["chattering"].as_bool().unwrap(),
             worst,
@@ -497,10 +505,10 @@ fn chattering_inputs_are_reported() {
     let (smooth, chatter) = (activity[0], activity[1]);
     assert!(
         !smooth.0 && smooth.1 < 0.05 && !smooth.2 && !smooth.3,
-        "pd_hover: {smooth:?}"
+        "defaults: {smooth:?}"
     );
     assert!(
         chatter.0 && chatter.1 > 0.2 && chatter.2 && chatter.3,
-        "sindy_m100: {chatter:?}"
+        "no rate weight: {chatter:?}"
     );
 }

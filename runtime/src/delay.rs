@@ -2,22 +2,23 @@
 //! solves from the state the aircraft will be in when its command takes effect.
 //!
 //! A command sent at sample k reaches channel i of the aircraft at sample k + dᵢ (dᵢ = the
-//! generated crate's `INPUT_DELAY_SAMPLES[i]`). Over the samples k, k+1, …, k+D−1
-//! (D = maxᵢ dᵢ) channel i is driven by the inputs sent at k − dᵢ, k − dᵢ + 1, …: the prediction
+//! generated crate's `INPUT_DELAY_SAMPLES[i]`). Over the samples k, k+1, …, k+D−1, with
+//! D = minᵢ dᵢ the delay every channel shares, every channel is driven by inputs already sent:
+//! the prediction
 //!
 //! ```text
 //! x̂₀ = x_k (measured),   x̂ₘ₊₁ = F(x̂ₘ, ûₘ),   ûₘ,ᵢ = u_{k+m−dᵢ, i}   m = 0 … D−1
 //! ```
 //!
-//! gives x̂_D, the state when the command computed now takes effect on the slowest channel. With
-//! F the crate's `discrete_dynamics` and equal delays this is exact (up to the model).
+//! gives x̂_D, the state when the command computed now takes effect on the fastest channel. With
+//! F the crate's `discrete_dynamics` this is exact (up to the model).
 //!
-//! **Channels with different delays.** For m ≥ dᵢ the input active on channel i at k + m is one
-//! that has not been sent yet (it is computed now or later). The prediction assumes the last
-//! input sent is held on that channel (ûₘ,ᵢ = u_{k−1, i}), and the MPC's first input then reaches
-//! that channel D − dᵢ samples before the predicted time. The error is that of holding the last
-//! command for D − dᵢ samples; to remove it, give all channels the largest delay (delay the faster
-//! channels in the firmware by D − dᵢ samples and list D for every channel).
+//! **Channels with different delays.** The rest of channel i's delay, its lead dᵢ − D
+//! (`INPUT_LEAD[i]` of a generated crate), is the solver's: its plan holds channel i's inputs at
+//! stages k < `INPUT_LEAD[i]` (sent already, not decisions) and the input it returns for channel i
+//! is the one planned at stage `INPUT_LEAD[i]` (docs/mpc.md, "Input delays"). Predicting over the
+//! largest delay instead, with the not-yet-sent inputs held, tells the MPC that the faster
+//! channels answer later than they do; its closed loop then chatters between the input bounds.
 //!
 //! Delays are whole samples: `INPUT_DELAY` rounded at generation; the rest (at most DT/2) is not
 //! compensated.
@@ -140,9 +141,14 @@ where
         &self.delays
     }
 
-    /// The largest delay: the number of samples `predict` looks ahead.
+    /// The largest delay (the history `predict` reaches back over).
     pub fn max_delay(&self) -> usize {
         self.delays.iter().copied().max().unwrap_or(0)
+    }
+
+    /// The delay every channel shares (the smallest): the number of samples `predict` looks ahead.
+    pub fn shared_delay(&self) -> usize {
+        self.delays.iter().copied().min().unwrap_or(0)
     }
 
     /// The input sent `age` samples ago (1 = the latest), if the history reaches that far.
@@ -150,15 +156,13 @@ where
         self.history.get(age.checked_sub(1)?)
     }
 
-    /// The input active on each channel at sample k + m (k = now), as far as it has been sent;
-    /// a channel whose input is not sent yet holds the latest one.
+    /// The input active on each channel at sample k + m (k = now, m below the shared delay, so
+    /// that every channel's was sent already).
     fn active(&self, m: usize) -> [R; NU] {
         let mut u = [R::ZERO; NU];
-        let latest = self.history.first();
         for (i, (ui, &d)) in u.iter_mut().zip(&self.delays).enumerate() {
-            // Sent at k + m − d, i.e. d − m samples ago; not sent yet if m ≥ d.
-            let sent = if m < d { self.sent(d - m) } else { latest };
-            if let Some(v) = sent.and_then(|s| s.get(i)) {
+            // Sent at k + m − d, i.e. d − m ≥ 1 samples ago.
+            if let Some(v) = self.sent(d.saturating_sub(m)).and_then(|s| s.get(i)) {
                 *ui = *v;
             }
         }
@@ -172,10 +176,10 @@ where
     R: Real,
     F: Fn(&[R; NX], &[R; NU]) -> [R; NX],
 {
-    /// x̂_D from the measured x (module docs). No delay: `x` itself.
+    /// x̂_D from the measured x (module docs). No shared delay: `x` itself.
     fn predict(&self, x: &[R; NX]) -> [R; NX] {
         let mut xm = *x;
-        for m in 0..self.max_delay() {
+        for m in 0..self.shared_delay() {
             xm = (self.dynamics)(&xm, &self.active(m));
         }
         xm
@@ -193,7 +197,7 @@ where
     }
 
     fn lookahead(&self) -> usize {
-        self.max_delay()
+        self.shared_delay()
     }
 }
 
@@ -240,19 +244,25 @@ mod tests {
     }
 
     #[test]
-    fn channels_with_different_delays_use_the_input_active_on_each() {
-        // Channel 0 delayed by 3, channel 1 by 1: over k, k+1, k+2 channel 0 sees the inputs sent
-        // at k−3, k−2, k−1; channel 1 sees u_{k−1} at k, then (not sent yet) holds u_{k−1}.
-        let mut c = DelayCompensator::<f64, _, 2, 2, 3>::new(integrator, [3, 1], [0.0; 2]).unwrap();
+    fn channels_with_different_delays_are_predicted_over_the_shared_delay() {
+        // Channel 0 delayed by 3, channel 1 by 2: the shared delay is 2. Over k, k+1 channel 0
+        // sees the inputs sent at k−3, k−2 and channel 1 those sent at k−2, k−1; the third sample
+        // of channel 0's delay is the solver's (its lead).
+        let mut c = DelayCompensator::<f64, _, 2, 2, 3>::new(integrator, [3, 2], [0.0; 2]).unwrap();
         for u in [[1.0, 10.0], [2.0, 20.0], [4.0, 40.0]] {
             c.record(&u);
         }
-        assert_eq!(c.predict(&[0.0, 0.0]), [1.0 + 2.0 + 4.0, 3.0 * 40.0]);
+        assert_eq!((c.shared_delay(), c.max_delay()), (2, 3));
+        assert_eq!(StatePredictor::<f64, 2, 2>::lookahead(&c), 2);
+        assert_eq!(c.predict(&[0.0, 0.0]), [1.0 + 2.0, 20.0 + 40.0]);
+        // One channel without delay: nothing is predicted.
+        let c0 = DelayCompensator::<f64, _, 2, 2, 3>::new(integrator, [3, 0], [5.0; 2]).unwrap();
+        assert_eq!(c0.predict(&[1.0, 1.0]), [1.0, 1.0]);
     }
 
     #[test]
     fn history_starts_at_the_initial_input_and_reset_refills_it() {
-        let mut c = DelayCompensator::<f64, _, 2, 2, 2>::new(integrator, [2, 1], [1.0, 2.0]).unwrap();
+        let mut c = DelayCompensator::<f64, _, 2, 2, 2>::new(integrator, [2, 2], [1.0, 2.0]).unwrap();
         assert_eq!(c.predict(&[0.0, 0.0]), [2.0, 4.0]);
         c.record(&[5.0, 5.0]);
         c.reset(&[-1.0, 0.5]);

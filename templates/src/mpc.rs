@@ -5,10 +5,10 @@
 use crate::kernels;
 use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
-use crate::rk4::{discrete_dynamics, discrete_linearization};
+use crate::rk4::{discrete_dynamics, discrete_linearization, hold_sent_inputs, input_to_send, is_sent};
 use crate::{
-    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, TRUST_BOUND,
-    U_MAX, U_MIN,
+    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, R_DELTA,
+    TRUST_BOUND, U_MAX, U_MIN,
 };
 
 /// What happened in a solve.
@@ -64,6 +64,11 @@ pub struct Mpc {
     xs: [[Real; NX]; N + 1],
     /// Guess ū₀..ū_{N−1}.
     us: [[Real; NU]; N],
+    /// u₋₁: the input applied over the sample before stage 0 (where the rate term Δ₀ starts).
+    u_prev: [Real; NU],
+    /// diag(S) of the rate term: `R_DELTA` (a field only so that the template's tests can compare
+    /// with the stage-wise solver, which has no rate term, at S = 0).
+    rate_weights: [Real; NU],
     reference: [[Real; NX]; N + 1],
     has_reference: bool,
     /// Aₖ = ∂F/∂x, Bₖ = ∂F/∂u at the guess; cₖ = F(x̄ₖ, ūₖ) − x̄ₖ₊₁.
@@ -135,6 +140,8 @@ impl Mpc {
         Self {
             xs: [[0.0; NX]; N + 1],
             us: [[0.0; NU]; N],
+            u_prev: [0.0; NU],
+            rate_weights: R_DELTA,
             reference: [[0.0; NX]; N + 1],
             has_reference: false,
             a: [[[0.0; NX]; NX]; N],
@@ -159,6 +166,7 @@ impl Mpc {
         let u = clamp_input(u);
         self.xs = [*x0; N + 1];
         self.us = [u; N];
+        self.u_prev = u;
         self.phase = Phase::Stale;
     }
 
@@ -172,6 +180,8 @@ impl Mpc {
         for k in 0..N {
             self.us[k] = clamp_input(&us[k]);
         }
+        // u₋₁ (the input applied before the plan, set by `initialize` and `shift`) is not part of
+        // the guess: it stays.
         self.phase = Phase::Stale;
         true
     }
@@ -200,6 +210,7 @@ impl Mpc {
             return Status::NumericalFailure;
         }
         self.condense();
+        self.add_rate_hessian();
         // lo = u_min − ū ≤ v ≤ u_max − ū = hi
         for k in 0..N {
             for i in 0..NU {
@@ -240,6 +251,7 @@ impl Mpc {
             }
             self.a[k] = a;
             self.b[k] = b;
+            hold_sent_inputs(k, &mut self.b[k]);
             finite &= all_finite(&self.c[k]) && a.iter().all(|r| all_finite(r)) && b.iter().all(|r| all_finite(r));
         }
         finite
@@ -257,10 +269,11 @@ impl Mpc {
             let bi = &self.b[i];
             // M = Bᵢᵀ P
             let m = kernels::bt_p(bi, &p);
-            // H_ii = M Bᵢ + R + δI
+            // H_ii = M Bᵢ + R + δI; an input sent already (column of Bᵢ zero) gets H_ii = 1 and
+            // gradient 0 (`feedback`): decoupled, its step is 0.
             let mut hii = kernels::e_b(&m, bi);
             for r in 0..NU {
-                hii[r][r] += R[r] + REGULARISATION;
+                hii[r][r] += if is_sent(i, r) { 1.0 } else { R[r] + REGULARISATION };
                 self.h[i * NU + r][i * NU..(i + 1) * NU].copy_from_slice(&hii[r]);
             }
             // E = M Aᵢ ⋯ A_{j+1}, H_ij = E B_j and H_ji = H_ijᵀ
@@ -285,6 +298,42 @@ impl Mpc {
         }
     }
 
+    /// The input-rate term ½ Σₖ Δₖᵀ S Δₖ, Δₖ = uₖ − uₖ₋₁ (u₋₁ fixed): S on the diagonal block of
+    /// each uₖ once per rate it is part of (Δₖ and Δₖ₊₁), −S between uₖ₋₁ and uₖ. Inputs sent
+    /// already are not variables (their step is 0): no term couples them.
+    fn add_rate_hessian(&mut self) {
+        for k in 0..N {
+            for r in 0..NU {
+                let s = self.rate_weights[r];
+                if s == 0.0 || is_sent(k, r) {
+                    continue;
+                }
+                let v = k * NU + r;
+                self.h[v][v] += if k + 1 < N { 2.0 * s } else { s };
+                if k > 0 && !is_sent(k - 1, r) {
+                    self.h[v][v - NU] -= s;
+                    self.h[v - NU][v] -= s;
+                }
+            }
+        }
+    }
+
+    /// Without the rate term (S = 0): the stage-wise solver's problem, for the template's tests
+    /// (`mpc_riccati.rs`, which a generated crate does not carry alongside this file).
+    #[cfg(test)]
+    #[allow(dead_code)]
+    pub(crate) fn without_rate_term(mut self) -> Self {
+        self.rate_weights = [0.0; NU];
+        self
+    }
+
+    /// Δ̄ₖ,ᵣ = ūₖ,ᵣ − ūₖ₋₁,ᵣ of the guess (ū₋₁ = u₋₁).
+    #[inline]
+    fn rate(&self, k: usize, r: usize) -> Real {
+        let before = if k == 0 { self.u_prev[r] } else { self.us[k - 1][r] };
+        self.us[k][r] - before
+    }
+
     /// Factorise H_FF for the warm-start working set; if a pivot fails, add
     /// δI with growing δ. Some(regularised) on success, None if hopeless.
     fn factorize(&mut self) -> Option<bool> {
@@ -299,17 +348,18 @@ impl Mpc {
         self.factorize_regularised().then_some(true)
     }
 
-    /// The previous plan: its first input, nothing changed.
+    /// The previous plan: the input it sends now, nothing changed.
     fn keep_plan(&mut self, status: Status) -> Solution {
         Solution {
-            u0: clamp_input(&self.us[0]),
+            u0: clamp_input(&input_to_send(&self.us)),
             status,
             qp_iterations: 0,
             cost: self.cost(),
         }
     }
 
-    /// ½ Σₖ₌₀ᴺ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ ūₖᵀ R ūₖ of the guess (0 without a reference).
+    /// ½ Σₖ₌₀ᴺ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ (ūₖᵀ R ūₖ + Δ̄ₖᵀ S Δ̄ₖ) of the guess (0 without a
+    /// reference).
     fn cost(&self) -> Real {
         if !self.has_reference {
             return 0.0;
@@ -324,7 +374,8 @@ impl Mpc {
         }
         for k in 0..N {
             for i in 0..NU {
-                cost += 0.5 * R[i] * self.us[k][i] * self.us[k][i];
+                let d = self.rate(k, i);
+                cost += 0.5 * (R[i] * self.us[k][i] * self.us[k][i] + self.rate_weights[i] * d * d);
             }
         }
         if cost.is_finite() {
@@ -389,7 +440,13 @@ impl Mpc {
         for j in (0..N).rev() {
             let mut ru = [0.0; NU];
             for r in 0..NU {
-                ru[r] = R[r] * self.us[j][r];
+                // R ūⱼ + S (Δ̄ⱼ − Δ̄ⱼ₊₁): the input and rate terms' gradient at the guess.
+                ru[r] = if is_sent(j, r) {
+                    0.0
+                } else {
+                    let later = if j + 1 < N { self.rate(j + 1, r) } else { 0.0 };
+                    R[r] * self.us[j][r] + self.rate_weights[r] * (self.rate(j, r) - later)
+                };
             }
             let gj = kernels::bt_x_add(&self.b[j], &p, &ru);
             self.g[j * NU..(j + 1) * NU].copy_from_slice(&gj);
@@ -437,10 +494,16 @@ impl Mpc {
         for k in 0..N {
             let mut vk = [0.0; NU];
             vk.copy_from_slice(&self.v[k * NU..(k + 1) * NU]);
+            // Inputs sent already stay as they were (their step is 0 up to rounding).
+            for j in 0..NU {
+                if is_sent(k, j) {
+                    vk[j] = 0.0;
+                }
+            }
             let next = kernels::b_x_add(&self.b[k], &vk, &kernels::a_x_add(&self.a[k], &dx, &self.c[k]));
             let mut u = [0.0; NU];
             for j in 0..NU {
-                u[j] = self.us[k][j] + self.v[k * NU + j];
+                u[j] = self.us[k][j] + vk[j];
             }
             self.us[k] = clamp_input(&u);
             for i in 0..NX {
@@ -455,7 +518,7 @@ impl Mpc {
             return self.keep_plan(Status::NumericalFailure);
         }
         Solution {
-            u0: self.us[0],
+            u0: input_to_send(&self.us),
             status,
             qp_iterations: result.iterations,
             cost: self.cost(),
@@ -501,6 +564,8 @@ impl Mpc {
     /// repeated and x̄_N ← F(x̄_{N−1}, ū_{N−1}); the stored reference and the
     /// QP working set shift alike.
     pub fn shift(&mut self) {
+        // Stage 0's input is the one applied over the sample that now lies before the plan.
+        self.u_prev = self.us[0];
         for k in 0..N {
             self.xs[k] = self.xs[k + 1];
             self.reference[k] = self.reference[k + 1];
@@ -552,6 +617,11 @@ mod tests {
                 }
                 if r == c {
                     s += R[r % NU] + REGULARISATION;
+                    // The rate term: S once per rate uₖ takes part in.
+                    s += R_DELTA[r % NU] * if r / NU + 1 < N { 2.0 } else { 1.0 };
+                }
+                if r % NU == c % NU && (r / NU).abs_diff(c / NU) == 1 {
+                    s -= R_DELTA[r % NU];
                 }
                 h[r][c] = s;
             }
@@ -619,8 +689,8 @@ mod tests {
         }
         // At rest x₀ = B u / K; the optimal constant u balances ½ q (B u / K − 0.5)² against
         // ½ r u²: u = q (B/K) 0.5 / (q B²/K² + r) = 0.25 / 0.35, so x₀ = u / 2 ≈ 0.357 (the
-        // finite horizon and terminal weight move it slightly).
-        assert!((x[0] - 0.25 / 0.35 / 2.0).abs() < 0.01, "x = {x:?}");
+        // finite horizon, the terminal weight and the rate term within the plan move it: 0.346).
+        assert!((x[0] - 0.25 / 0.35 / 2.0).abs() < 0.015, "x = {x:?}");
         assert!(x[1].abs() < 1e-3);
     }
 

@@ -4,7 +4,7 @@
 //! is that of the condensed solver (`mpc.rs`); the notation is docs/mpc.md's.
 
 use crate::riccati::{IpmStatus, RiccatiIpm, StageQp};
-use crate::rk4::{discrete_dynamics, discrete_linearization};
+use crate::rk4::{discrete_dynamics, discrete_linearization, hold_sent_inputs, input_to_send, is_sent};
 use crate::{
     Real, ENVELOPE_HI, ENVELOPE_LO, MAX_IPM_ITERATIONS, N, NU, NX, Q, Q_TERMINAL, R, TRUST_BOUND, U_MAX, U_MIN,
 };
@@ -216,15 +216,16 @@ impl Mpc {
             }
             self.a[k] = a;
             self.b[k] = b;
+            hold_sent_inputs(k, &mut self.b[k]);
             finite &= all_finite(&self.c[k]) && a.iter().all(|r| all_finite(r)) && b.iter().all(|r| all_finite(r));
         }
         finite
     }
 
-    /// The previous plan: its first input, nothing changed.
+    /// The previous plan: the input it sends now, nothing changed.
     fn keep_plan(&mut self, status: Status) -> Solution {
         Solution {
-            u0: clamp_input(&self.us[0]),
+            u0: clamp_input(&input_to_send(&self.us)),
             status,
             qp_iterations: 0,
             cost: self.cost(),
@@ -322,7 +323,15 @@ impl Mpc {
         self.xs[0] = *x0;
         let mut dx = z0;
         for k in 0..N {
-            let (a, b, v) = (&self.a[k], &self.b[k], &self.qp.v[k]);
+            let (a, b) = (&self.a[k], &self.b[k]);
+            // Inputs sent already stay as they were: their column of Bₖ is zero, which decouples
+            // them in the QP, so the others' steps do not depend on theirs.
+            let mut v = self.qp.v[k];
+            for j in 0..NU {
+                if is_sent(k, j) {
+                    v[j] = 0.0;
+                }
+            }
             let mut next = self.c[k];
             for i in 0..NX {
                 for j in 0..NX {
@@ -348,7 +357,7 @@ impl Mpc {
             return self.keep_plan(Status::NumericalFailure);
         }
         Solution {
-            u0: self.us[0],
+            u0: input_to_send(&self.us),
             status,
             qp_iterations: result.iterations,
             cost: self.cost(),
@@ -437,7 +446,8 @@ mod tests {
             }
             let x0 = [2.0 * next(), 2.0 * next()];
             let r = reference(3.0 * next());
-            let mut dense = crate::mpc::Mpc::new();
+            // The stage-wise solver has no input-rate term: compare at S = 0.
+            let mut dense = crate::mpc::Mpc::new().without_rate_term();
             let mut staged = Mpc::new();
             assert!(dense.set_guess(&xs, &us) && staged.set_guess(&xs, &us));
             let a = dense.solve(&x0, &r);

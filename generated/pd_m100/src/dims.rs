@@ -38,6 +38,9 @@ pub const Q_TERMINAL: [Real; NX] = [
 ];
 /// Input weights diag(R).
 pub const R: [Real; NU] = [0.1, 0.1, 0.1, 10.0];
+/// Input-rate weights diag(S) on uₖ − uₖ₋₁, u₋₁ = the input applied before stage 0 (the condensed
+/// solver; the stage-wise one is generated only with S = 0).
+pub const R_DELTA: [Real; NU] = [0.0, 50.0, 50.0, 0.0];
 /// Lower input bounds.
 pub const U_MIN: [Real; NU] = [-5.0, -0.611, -0.611, -2.6179938779914944];
 /// Upper input bounds.
@@ -47,6 +50,12 @@ pub const U_MAX: [Real; NU] = [5.0, 0.611, 0.611, 2.6179938779914944];
 pub const INPUT_DELAY: [Real; NU] = [0.12, 0.0, 0.0, 0.0];
 /// `INPUT_DELAY` rounded to whole samples of `DT`.
 pub const INPUT_DELAY_SAMPLES: [usize; NU] = [4, 0, 0, 0];
+/// Lead of each channel over the delay every channel shares: dᵢ − minⱼ dⱼ samples
+/// (dᵢ = `INPUT_DELAY_SAMPLES[i]`). The runtime's delay compensator predicts the state over the
+/// shared delay; the solver treats the rest: channel i's inputs at stages k < `INPUT_LEAD[i]` were
+/// sent already and are held fixed, and the input to send now on channel i is the plan's at stage
+/// `INPUT_LEAD[i]` (docs/mpc.md, "Input delays").
+pub const INPUT_LEAD: [usize; NU] = [4, 0, 0, 0];
 /// Hard cap on active-set iterations per QP.
 pub const MAX_QP_ITERATIONS: usize = 200;
 /// Hard cap on interior-point iterations per QP of the stage-wise (Riccati) solver.

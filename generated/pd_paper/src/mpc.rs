@@ -8,10 +8,12 @@
 use crate::kernels;
 use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
-use crate::rk4::{discrete_dynamics, discrete_linearization};
+use crate::rk4::{
+    discrete_dynamics, discrete_linearization, hold_sent_inputs, input_to_send, is_sent,
+};
 use crate::{
     Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R,
-    REGULARISATION, TRUST_BOUND, U_MAX, U_MIN,
+    REGULARISATION, R_DELTA, TRUST_BOUND, U_MAX, U_MIN,
 };
 /// What happened in a solve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,6 +65,11 @@ pub struct Mpc {
     xs: [[Real; NX]; N + 1],
     /// Guess ū₀..ū_{N−1}.
     us: [[Real; NU]; N],
+    /// u₋₁: the input applied over the sample before stage 0 (where the rate term Δ₀ starts).
+    u_prev: [Real; NU],
+    /// diag(S) of the rate term: `R_DELTA` (a field only so that the template's tests can compare
+    /// with the stage-wise solver, which has no rate term, at S = 0).
+    rate_weights: [Real; NU],
     reference: [[Real; NX]; N + 1],
     has_reference: bool,
     /// Aₖ = ∂F/∂x, Bₖ = ∂F/∂u at the guess; cₖ = F(x̄ₖ, ūₖ) − x̄ₖ₊₁.
@@ -126,6 +133,8 @@ impl Mpc {
         Self {
             xs: [[0.0; NX]; N + 1],
             us: [[0.0; NU]; N],
+            u_prev: [0.0; NU],
+            rate_weights: R_DELTA,
             reference: [[0.0; NX]; N + 1],
             has_reference: false,
             a: [[[0.0; NX]; NX]; N],
@@ -149,6 +158,7 @@ impl Mpc {
         let u = clamp_input(u);
         self.xs = [*x0; N + 1];
         self.us = [u; N];
+        self.u_prev = u;
         self.phase = Phase::Stale;
     }
     /// Set the whole guess (e.g. from an external planner); inputs are clamped
@@ -186,6 +196,7 @@ impl Mpc {
             return Status::NumericalFailure;
         }
         self.condense();
+        self.add_rate_hessian();
         for k in 0..N {
             for i in 0..NU {
                 self.lo[k * NU + i] = U_MIN[i] - self.us[k][i];
@@ -220,6 +231,7 @@ impl Mpc {
             }
             self.a[k] = a;
             self.b[k] = b;
+            hold_sent_inputs(k, &mut self.b[k]);
             finite
                 &= all_finite(&self.c[k]) && a.iter().all(|r| all_finite(r))
                     && b.iter().all(|r| all_finite(r));
@@ -239,7 +251,7 @@ impl Mpc {
             let m = kernels::bt_p(bi, &p);
             let mut hii = kernels::e_b(&m, bi);
             for r in 0..NU {
-                hii[r][r] += R[r] + REGULARISATION;
+                hii[r][r] += if is_sent(i, r) { 1.0 } else { R[r] + REGULARISATION };
                 self.h[i * NU + r][i * NU..(i + 1) * NU].copy_from_slice(&hii[r]);
             }
             let mut e = m;
@@ -261,6 +273,39 @@ impl Mpc {
             }
         }
     }
+    /// The input-rate term ½ Σₖ Δₖᵀ S Δₖ, Δₖ = uₖ − uₖ₋₁ (u₋₁ fixed): S on the diagonal block of
+    /// each uₖ once per rate it is part of (Δₖ and Δₖ₊₁), −S between uₖ₋₁ and uₖ. Inputs sent
+    /// already are not variables (their step is 0): no term couples them.
+    fn add_rate_hessian(&mut self) {
+        for k in 0..N {
+            for r in 0..NU {
+                let s = self.rate_weights[r];
+                if s == 0.0 || is_sent(k, r) {
+                    continue;
+                }
+                let v = k * NU + r;
+                self.h[v][v] += if k + 1 < N { 2.0 * s } else { s };
+                if k > 0 && !is_sent(k - 1, r) {
+                    self.h[v][v - NU] -= s;
+                    self.h[v - NU][v] -= s;
+                }
+            }
+        }
+    }
+    /// Without the rate term (S = 0): the stage-wise solver's problem, for the template's tests
+    /// (`mpc_riccati.rs`, which a generated crate does not carry alongside this file).
+    #[cfg(test)]
+    #[allow(dead_code)]
+    pub(crate) fn without_rate_term(mut self) -> Self {
+        self.rate_weights = [0.0; NU];
+        self
+    }
+    /// Δ̄ₖ,ᵣ = ūₖ,ᵣ − ūₖ₋₁,ᵣ of the guess (ū₋₁ = u₋₁).
+    #[inline]
+    fn rate(&self, k: usize, r: usize) -> Real {
+        let before = if k == 0 { self.u_prev[r] } else { self.us[k - 1][r] };
+        self.us[k][r] - before
+    }
     /// Factorise H_FF for the warm-start working set; if a pivot fails, add
     /// δI with growing δ. Some(regularised) on success, None if hopeless.
     fn factorize(&mut self) -> Option<bool> {
@@ -273,16 +318,17 @@ impl Mpc {
         }
         self.factorize_regularised().then_some(true)
     }
-    /// The previous plan: its first input, nothing changed.
+    /// The previous plan: the input it sends now, nothing changed.
     fn keep_plan(&mut self, status: Status) -> Solution {
         Solution {
-            u0: clamp_input(&self.us[0]),
+            u0: clamp_input(&input_to_send(&self.us)),
             status,
             qp_iterations: 0,
             cost: self.cost(),
         }
     }
-    /// ½ Σₖ₌₀ᴺ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ ūₖᵀ R ūₖ of the guess (0 without a reference).
+    /// ½ Σₖ₌₀ᴺ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ (ūₖᵀ R ūₖ + Δ̄ₖᵀ S Δ̄ₖ) of the guess (0 without a
+    /// reference).
     fn cost(&self) -> Real {
         if !self.has_reference {
             return 0.0;
@@ -297,7 +343,11 @@ impl Mpc {
         }
         for k in 0..N {
             for i in 0..NU {
-                cost += 0.5 * R[i] * self.us[k][i] * self.us[k][i];
+                let d = self.rate(k, i);
+                cost
+                    += 0.5
+                        * (R[i] * self.us[k][i] * self.us[k][i]
+                            + self.rate_weights[i] * d * d);
             }
         }
         if cost.is_finite() { cost } else { Real::MAX }
@@ -353,7 +403,13 @@ impl Mpc {
         for j in (0..N).rev() {
             let mut ru = [0.0; NU];
             for r in 0..NU {
-                ru[r] = R[r] * self.us[j][r];
+                ru[r] = if is_sent(j, r) {
+                    0.0
+                } else {
+                    let later = if j + 1 < N { self.rate(j + 1, r) } else { 0.0 };
+                    R[r] * self.us[j][r]
+                        + self.rate_weights[r] * (self.rate(j, r) - later)
+                };
             }
             let gj = kernels::bt_x_add(&self.b[j], &p, &ru);
             self.g[j * NU..(j + 1) * NU].copy_from_slice(&gj);
@@ -404,6 +460,11 @@ impl Mpc {
         for k in 0..N {
             let mut vk = [0.0; NU];
             vk.copy_from_slice(&self.v[k * NU..(k + 1) * NU]);
+            for j in 0..NU {
+                if is_sent(k, j) {
+                    vk[j] = 0.0;
+                }
+            }
             let next = kernels::b_x_add(
                 &self.b[k],
                 &vk,
@@ -411,7 +472,7 @@ impl Mpc {
             );
             let mut u = [0.0; NU];
             for j in 0..NU {
-                u[j] = self.us[k][j] + self.v[k * NU + j];
+                u[j] = self.us[k][j] + vk[j];
             }
             self.us[k] = clamp_input(&u);
             for i in 0..NX {
@@ -428,7 +489,7 @@ impl Mpc {
             return self.keep_plan(Status::NumericalFailure);
         }
         Solution {
-            u0: self.us[0],
+            u0: input_to_send(&self.us),
             status,
             qp_iterations: result.iterations,
             cost: self.cost(),
@@ -478,6 +539,7 @@ impl Mpc {
     /// repeated and x̄_N ← F(x̄_{N−1}, ū_{N−1}); the stored reference and the
     /// QP working set shift alike.
     pub fn shift(&mut self) {
+        self.u_prev = self.us[0];
         for k in 0..N {
             self.xs[k] = self.xs[k + 1];
             self.reference[k] = self.reference[k + 1];

@@ -6,7 +6,7 @@
 use crate::model::{
     continuous_dynamics, continuous_sensitivity, sensitivity_axpy, sensitivity_step,
 };
-use crate::{Real, DT, NU, NX, NZ, SUBSTEPS};
+use crate::{Real, DT, INPUT_LEAD, N, NU, NX, NZ, SUBSTEPS};
 /// Substep length h = DT / M.
 pub const H: Real = DT / SUBSTEPS as Real;
 /// y = x + a k
@@ -93,4 +93,32 @@ pub fn discrete_jacobians(
 ) -> ([[Real; NX]; NX], [[Real; NU]; NX]) {
     let (_, a, b) = discrete_linearization(x, u);
     (a, b)
+}
+/// Whether input i at stage k of the plan was sent already: k < `INPUT_LEAD[i]` (its delay beyond
+/// the one every channel shares; docs/mpc.md "Input delays"). Such an input is held, not a decision.
+#[inline]
+pub fn is_sent(k: usize, i: usize) -> bool {
+    k < INPUT_LEAD[i]
+}
+/// Zero the columns of Bₖ of the inputs sent already at stage k: a step in them changes nothing,
+/// so the QP sees them decoupled and the solver holds them.
+#[inline]
+pub fn hold_sent_inputs(k: usize, b: &mut [[Real; NU]; NX]) {
+    for i in 0..NU {
+        if is_sent(k, i) {
+            for row in b.iter_mut() {
+                row[i] = 0.0;
+            }
+        }
+    }
+}
+/// The input to send now: channel i's planned input at stage `INPUT_LEAD[i]` (stage 0 without
+/// delays or with equal ones).
+#[inline]
+pub fn input_to_send(us: &[[Real; NU]; N]) -> [Real; NU] {
+    let mut u = [0.0; NU];
+    for i in 0..NU {
+        u[i] = us[INPUT_LEAD[i].min(N - 1)][i];
+    }
+    u
 }

@@ -6,7 +6,7 @@
 
 `no_std`, no allocation, no `unsafe`; sizes are constants. x = [x, y, z, roll, pitch, yaw, vx, vy, vz, roll_rate, pitch_rate, yaw_rate], u = [u_vz, u_roll, u_pitch, u_yaw_rate].
 
-The dynamics include the model file's `corrections`. Input delays (not part of the dynamics): `INPUT_DELAY`, `INPUT_DELAY_SAMPLES`.
+The dynamics include the model file's `corrections`. Input delays (not part of the dynamics): `INPUT_DELAY`, `INPUT_DELAY_SAMPLES`, `INPUT_LEAD`.
 
 QP solver: `condensed` (`--qp`, docs/mpc.md).*/
 #![no_std]

@@ -63,6 +63,8 @@ pub fn read(crate_dir: &Path) -> Result<CrateDims, String> {
             q: get("Q")?,
             q_terminal: get("Q_TERMINAL")?,
             r: get("R")?,
+            // Crates generated before the input-rate weight have no such constant.
+            r_delta: get("R_DELTA").unwrap_or_else(|_| vec![0.0; get("R").map_or(0, |r| r.len())]),
             u_min: get("U_MIN")?,
             u_max: get("U_MAX")?,
             max_qp_iterations: scalar("MAX_QP_ITERATIONS")? as usize,

@@ -67,7 +67,7 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     plant: Option<PathBuf>,
     /// MPC options file of the closed-loop comparison (docs/mpc.md; default: the paper's weights but
-    /// q = 1 on yaw and r = 10 on u_yaw_rate, as every command).
+    /// q = 1 on yaw, r = 10 on u_yaw_rate and r_delta = 50 on u_roll and u_pitch, as every command).
     #[arg(long, requires = "plant")]
     mpc: Option<PathBuf>,
     /// Compare the model with the derivative pointwise (ẋ_SG − f(x, u), the identification's target)

@@ -79,7 +79,7 @@ pub struct TrackArgs {
     #[arg(long, default_value_t = 30)]
     horizon: usize,
     /// MPC options file (weights, bounds; docs/mpc.md). Default: the paper's weights and bounds but
-    /// q = 1 on yaw and r = 10 on u_yaw_rate; examples/mpc_paper.json has the paper's own.
+    /// q = 1 on yaw, r = 10 on u_yaw_rate and an input-rate weight r_delta = 50 on u_roll and u_pitch; examples/mpc_paper.json has the paper's own.
     #[arg(long)]
     mpc: Option<PathBuf>,
     /// Largest overall position RMSE (m, whole flight, approach included) of a loop that tracked;

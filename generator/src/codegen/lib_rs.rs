@@ -31,10 +31,11 @@ pub fn dims_values(
         quote!(#l)
     };
     // Whole samples at the generation rate: round(delay · rate).
-    let delay_samples = delays.iter().map(|d| {
-        let l = Literal::usize_unsuffixed((d * options.rate_hz).round() as usize);
-        quote!(#l)
-    });
+    let samples: Vec<usize> = delays.iter().map(|d| (d * options.rate_hz).round() as usize).collect();
+    let delay_samples = samples.iter().map(|&d| lit(d));
+    // The lead of each channel over the delay all channels share (docs/mpc.md "Input delays").
+    let shared = samples.iter().copied().min().unwrap_or(0);
+    let input_lead = samples.iter().map(|&d| lit(d - shared));
     // The guess's trust region: unbounded states are `Real::INFINITY`.
     let trust = options
         .envelope
@@ -70,10 +71,12 @@ pub fn dims_values(
         ("Q", array(&mpc.q)?),
         ("Q_TERMINAL", array(&mpc.q_terminal)?),
         ("R", array(&mpc.r)?),
+        ("R_DELTA", array(&mpc.r_delta)?),
         ("U_MIN", array(&mpc.u_min)?),
         ("U_MAX", array(&mpc.u_max)?),
         ("INPUT_DELAY", array(delays)?),
         ("INPUT_DELAY_SAMPLES", quote!([#(#delay_samples),*])),
+        ("INPUT_LEAD", quote!([#(#input_lead),*])),
         ("MAX_QP_ITERATIONS", lit(mpc.max_qp_iterations)),
         ("MAX_IPM_ITERATIONS", lit(mpc.max_ipm_iterations)),
         ("TRUST_BOUND", quote!([#(#trust),*])),
@@ -99,7 +102,7 @@ pub fn emit(model: &Model, ir: &ModelIr, qp: QpMethod) -> TokenStream {
         let extra = &states[model.base_nx()..];
         doc.push_str(&format!(
             "\n\nThe dynamics include the model file's `corrections`{}. Input delays (not part of the \
-             dynamics): `INPUT_DELAY`, `INPUT_DELAY_SAMPLES`.",
+             dynamics): `INPUT_DELAY`, `INPUT_DELAY_SAMPLES`, `INPUT_LEAD`.",
             if extra.is_empty() {
                 String::new()
             } else {

@@ -263,8 +263,36 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         }
         None => MpcOptions::defaults(model),
     };
+    // Each input's inputs already sent (its lead over the shared delay) are held at the start of
+    // the plan: the horizon must reach past them.
+    let lead = ir.input_lead(1.0 / options.rate_hz);
+    if let Some((j, &l)) = lead.iter().enumerate().max_by_key(|(_, &l)| l) {
+        if l >= options.horizon {
+            return Err(invalid(
+                "horizon",
+                format!(
+                    "the input {} is delayed {l} samples more than the fastest input; the horizon ({}) must be longer \
+                     than that (docs/mpc.md \"Input delays\")",
+                    model.inputs[j], options.horizon
+                ),
+            ));
+        }
+    }
     let structure = kernels::Structure::from_ir(&ir, substeps, &mpc.q, &mpc.q_terminal);
-    let qp = options.qp.resolve_for(&structure, options.horizon);
+    // The stage-wise solver has no input-rate term (it would need the previous input as a state):
+    // `auto` takes the condensed one when the options have one, `riccati` refuses them.
+    let has_rate = mpc.r_delta.iter().any(|&s| s != 0.0);
+    let qp = match options.qp {
+        QpChoice::Auto if has_rate => QpMethod::Condensed,
+        QpChoice::Riccati if has_rate => {
+            return Err(invalid(
+                "qp",
+                "the riccati solver has no input-rate term: give \"r_delta\" all 0 in the --mpc options file \
+                 (the default is 50 on u_roll and u_pitch) or use --qp condensed (docs/mpc.md)",
+            ))
+        }
+        choice => choice.resolve_for(&structure, options.horizon),
+    };
     let head = header::lines(model, options, substeps, &mpc, qp);
     let rs_header = header::rust(&head);
 

@@ -16,6 +16,8 @@ pub struct ModelIr {
     pub nu: usize,
     pub state_names: Vec<String>,
     pub input_names: Vec<String>,
+    /// Pure delay of each input in s (the model's `corrections.latency`; not part of f).
+    pub input_delays: Vec<f64>,
     /// ẋᵢ = f[i]
     pub f: Vec<Id>,
     /// ∂fᵢ/∂xⱼ
@@ -59,12 +61,21 @@ impl ModelIr {
             nu,
             state_names: model.states.clone(),
             input_names: model.inputs.clone(),
+            input_delays: model.input_delays(),
             f,
             fx,
             fu,
             f_tape,
             jac_tape,
         }
+    }
+
+    /// Each input's lead over the delay every input shares, in samples of `dt`: dᵢ − minⱼ dⱼ with
+    /// dᵢ = round(delayᵢ / dt) (the generated crate's `INPUT_LEAD`; docs/mpc.md "Input delays").
+    pub fn input_lead(&self, dt: f64) -> Vec<usize> {
+        let samples: Vec<usize> = self.input_delays.iter().map(|d| (d / dt).round() as usize).collect();
+        let shared = samples.iter().copied().min().unwrap_or(0);
+        samples.iter().map(|d| d - shared).collect()
     }
 
     fn vars(&self, x: &[f64], u: &[f64]) -> Vec<f64> {

@@ -117,6 +117,11 @@ pub struct GenericMpc {
     /// The guess's trust region, |x̄ᵢ| ≤ trust[i] ([`Envelope::trust_bounds`] of the default
     /// envelope, as in the generated crates).
     trust: Vec<f64>,
+    /// Each input's lead over the shared delay (the generated crate's `INPUT_LEAD`, at most N − 1):
+    /// input j's stages k < lead[j] were sent already and are held (docs/mpc.md "Input delays").
+    lead: Vec<usize>,
+    /// u₋₁: the input applied over the sample before stage 0 (the input-rate term's start).
+    u_prev: Vec<f64>,
 }
 
 impl GenericMpc {
@@ -147,6 +152,8 @@ impl GenericMpc {
             x_guess: vec![vec![0.0; nx]; n + 1],
             u_guess: vec![vec![0.0; nu]; n],
             trust: Envelope::default().trust_bounds(&ir.state_names),
+            lead: ir.input_lead(problem.dt).into_iter().map(|l| l.min(n - 1)).collect(),
+            u_prev: vec![0.0; nu],
             ir,
             problem,
         }
@@ -161,6 +168,7 @@ impl GenericMpc {
         assert_eq!(u.len(), self.ir.nu, "u length");
         self.x_guess.iter_mut().for_each(|x| x.copy_from_slice(x0));
         self.u_guess.iter_mut().for_each(|v| v.copy_from_slice(u));
+        self.u_prev.copy_from_slice(u);
     }
 
     /// Replace the guess: `xs` = x̄₀..x̄_N, `us` = ū₀..ū_{N−1}.
@@ -177,6 +185,7 @@ impl GenericMpc {
             us.len() == n && us.iter().all(|u| u.len() == nu),
             "us must be N vectors of NU"
         );
+        // u₋₁ (the input applied before the plan) is not part of the guess: it stays.
         self.x_guess = xs;
         self.u_guess = us;
     }
@@ -191,6 +200,7 @@ impl GenericMpc {
     /// x̄ₖ ← x̄ₖ₊₁, ūₖ ← ūₖ₊₁; the last input is repeated and x̄_N ← F(x̄_{N−1}, ū_{N−1}).
     pub fn shift(&mut self) {
         let n = self.problem.horizon;
+        self.u_prev = self.u_guess[0].clone();
         self.x_guess.rotate_left(1);
         self.u_guess.rotate_left(1);
         // Repeat the last input (now at N − 2); for N = 1 ū₀ is already the last input.
@@ -224,6 +234,17 @@ impl GenericMpc {
             iterations: max_iterations,
             last_step,
         })
+    }
+
+    /// The input to send now: input j's planned value at stage `lead[j]` (ū₀ without delays or
+    /// with equal ones).
+    pub fn input_to_send(&self) -> Vec<f64> {
+        self.lead.iter().enumerate().map(|(j, &k)| self.u_guess[k][j]).collect()
+    }
+
+    /// Whether input j at stage k was sent already (k < its lead): held, not a decision.
+    fn held(&self, k: usize, j: usize) -> bool {
+        k < self.lead[j]
     }
 
     /// ū₀..ū_{N−1} of the guess.
@@ -264,10 +285,12 @@ impl GenericMpc {
             }
         };
 
-        // The full step: ūₖ += δuₖ, x̄ₖ += δxₖ (x̄₀ = x₀ exactly).
+        // The full step: ūₖ += δuₖ (held inputs stay), x̄ₖ += δxₖ (x̄₀ = x₀ exactly).
         for k in 0..n {
             for j in 0..nu {
-                self.u_guess[k][j] += w[self.iu(k, j)];
+                if !self.held(k, j) {
+                    self.u_guess[k][j] += w[self.iu(k, j)];
+                }
             }
         }
         for k in 1..=n {
@@ -280,7 +303,7 @@ impl GenericMpc {
         // max |δuₖ| and max |δxₖ| over all k
         let step = w.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         let solution = GenericSolution {
-            u0: self.u_guess[0].clone(),
+            u0: self.input_to_send(),
             cost: self.cost(reference),
             qp_iterations,
         };
@@ -368,6 +391,9 @@ impl GenericMpc {
     ///      δuₖ                        ≤ u_max − ūₖ       (nonnegative cone)
     ///      −δuₖ                       ≤ ūₖ − u_min       (nonnegative cone)
     /// ```
+    ///
+    /// An input already sent (stage k below its lead) is held: its column of Bₖ is dropped and its
+    /// P entry is 1 with q 0, so that δuₖ,ⱼ = 0 (docs/mpc.md "Input delays").
     fn build_qp(&self, lin: &Linearization, x0: &[f64], reference: &[Vec<f64>]) -> SparseQp {
         let (nx, nu, n) = (self.ir.nx, self.ir.nu, self.problem.horizon);
         let o = &self.problem.options;
@@ -378,22 +404,48 @@ impl GenericMpc {
         let lower_row = |k: usize, j: usize| n_eq + n * nu + k * nu + j;
         let q_weight = |k: usize| if k < n { &o.q } else { &o.q_terminal };
 
-        // P: diagonal, so its upper triangle is the diagonal itself.
-        let mut p_diag = Vec::with_capacity(nw);
+        // P's upper triangle, column by column: diagonal on the states; on the inputs R + ρ, plus
+        // S for each rate Δₖ = uₖ − uₖ₋₁ an input takes part in, and −S between uₖ₋₁ and uₖ.
+        let mut p = ColumnBuilder::default();
         let mut q = Vec::with_capacity(nw);
         for k in 0..=n {
             for i in 0..nx {
-                p_diag.push(q_weight(k)[i]);
+                p.push(self.ix(k, i), q_weight(k)[i]);
+                p.end_column();
                 q.push(q_weight(k)[i] * (self.x_guess[k][i] - reference[k][i]));
             }
         }
+        // Δ̄ₖ = ūₖ − ūₖ₋₁ of the guess (ū₋₁ = u₋₁).
+        let rate = |k: usize, j: usize| {
+            let before = if k == 0 { self.u_prev[j] } else { self.u_guess[k - 1][j] };
+            self.u_guess[k][j] - before
+        };
         for k in 0..n {
             for j in 0..nu {
-                p_diag.push(o.r[j] + o.regularisation);
-                q.push(o.r[j] * self.u_guess[k][j]);
+                if self.held(k, j) {
+                    p.push(self.iu(k, j), 1.0);
+                    p.end_column();
+                    q.push(0.0);
+                    continue;
+                }
+                let s = o.r_delta[j];
+                if k > 0 && s != 0.0 && !self.held(k - 1, j) {
+                    p.push(self.iu(k - 1, j), -s);
+                }
+                let later = k + 1 < n;
+                p.push(
+                    self.iu(k, j),
+                    o.r[j] + o.regularisation + s * if later { 2.0 } else { 1.0 },
+                );
+                p.end_column();
+                let mut g = o.r[j] * self.u_guess[k][j] + s * rate(k, j);
+                if later {
+                    g -= s * rate(k + 1, j);
+                }
+                q.push(g);
             }
         }
-        let p = CscMatrix::new(nw, nw, (0..=nw).collect(), (0..nw).collect(), p_diag);
+        let p = p.finish(nw);
 
         // A, column by column (rows ascending within a column).
         let mut a = ColumnBuilder::default();
@@ -412,9 +464,11 @@ impl GenericMpc {
         }
         for k in 0..n {
             for j in 0..nu {
-                // −Bₖ δuₖ in the dynamics rows of step k, then the two bound rows.
-                for i in 0..nx {
-                    a.push(self.ix(k + 1, i), -lin.b[k][(i, j)]);
+                // −Bₖ δuₖ in the dynamics rows of step k (not for a held input), then the two bound rows.
+                if !self.held(k, j) {
+                    for i in 0..nx {
+                        a.push(self.ix(k + 1, i), -lin.b[k][(i, j)]);
+                    }
                 }
                 a.push(upper_row(k, j), 1.0);
                 a.push(lower_row(k, j), -1.0);
@@ -459,6 +513,13 @@ impl GenericMpc {
         }
         for u in &self.u_guess {
             cost += 0.5 * (0..u.len()).map(|j| o.r[j] * u[j] * u[j]).sum::<f64>();
+        }
+        for (k, u) in self.u_guess.iter().enumerate() {
+            let before = if k == 0 { &self.u_prev } else { &self.u_guess[k - 1] };
+            cost += 0.5
+                * (0..u.len())
+                    .map(|j| o.r_delta[j] * (u[j] - before[j]).powi(2))
+                    .sum::<f64>();
         }
         cost
     }
@@ -601,6 +662,7 @@ mod tests {
                 q: vec![3.0],
                 q_terminal: vec![5.0],
                 r: vec![0.2],
+                r_delta: vec![0.0],
                 u_min: vec![-u_bound],
                 u_max: vec![u_bound],
                 max_qp_iterations: 200,

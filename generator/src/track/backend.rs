@@ -166,9 +166,10 @@ impl Drop for HarnessBackend {
 ///
 /// A model with `corrections.latency` is compensated as the generated crate's harness does it
 /// (uavgen-runtime's `DelayCompensator`, runtime/src/delay.rs): delays in whole samples
-/// round(d/Δt), the MPC solves from the state predicted over the largest delay D with the inputs
-/// already sent (a channel whose input is not sent yet holds the latest), and its reference
-/// window starts D samples ahead.
+/// round(d/Δt), the MPC solves from the state predicted over the delay every channel shares
+/// (D = the smallest) with the inputs already sent, and its reference window starts D samples
+/// ahead; the solver holds each channel's inputs already sent beyond D (its lead) and sends the
+/// one planned at the lead (docs/mpc.md "Input delays").
 pub struct GenericBackend {
     mpc: GenericMpc,
     options: MpcOptions,
@@ -202,13 +203,13 @@ impl GenericBackend {
         }
     }
 
-    /// D: the largest input delay in samples.
+    /// D: the input delay every channel shares (the smallest), in samples.
     fn lookahead(&self) -> usize {
-        self.delays.iter().copied().max().unwrap_or(0)
+        self.delays.iter().copied().min().unwrap_or(0)
     }
 
-    /// x̂_D: the state when the input computed now takes effect on the slowest channel,
-    /// x̂ₘ₊₁ = F(x̂ₘ, ûₘ), ûₘ,ᵢ = u_{k+m−dᵢ, i} (the latest sent once m ≥ dᵢ).
+    /// x̂_D: the state when the input computed now takes effect on the fastest channel,
+    /// x̂ₘ₊₁ = F(x̂ₘ, ûₘ), ûₘ,ᵢ = u_{k+m−dᵢ, i} (all sent already: m < D ≤ dᵢ).
     fn predict(&self, x: &[f64]) -> Vec<f64> {
         let mut xm = x.to_vec();
         for m in 0..self.lookahead() {
@@ -217,7 +218,7 @@ impl GenericBackend {
                 .iter()
                 .enumerate()
                 .map(|(i, &d)| {
-                    let age = if m < d { d - m } else { 1 };
+                    let age = d - m; // m < D ≤ d
                     self.history.get(age - 1).map_or(0.0, |h| h[i])
                 })
                 .collect();
@@ -258,7 +259,8 @@ impl Backend for GenericBackend {
         self.trajectory = trajectory;
         self.t = t0;
         self.mpc.initialize(x0, u);
-        self.history = vec![u.to_vec(); self.lookahead()];
+        // The inputs sent over the largest delay (the prediction reaches back that far).
+        self.history = vec![u.to_vec(); self.delays.iter().copied().max().unwrap_or(0)];
         Ok(())
     }
 
@@ -270,11 +272,7 @@ impl Backend for GenericBackend {
         let elapsed = start.elapsed().as_nanos() as f64;
         let (u, status, qp_iterations) = match result {
             Ok(s) => (s.u0, "Solved".to_string(), s.qp_iterations),
-            Err(e) => (
-                self.mpc.planned_inputs().first().cloned().unwrap_or_default(),
-                format!("Failed({e})").replace(' ', "_"),
-                0,
-            ),
+            Err(e) => (self.mpc.input_to_send(), format!("Failed({e})").replace(' ', "_"), 0),
         };
         self.mpc.shift();
         self.t += self.dt;
