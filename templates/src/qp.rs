@@ -454,26 +454,7 @@ impl<const NV: usize> BoxQp<NV> {
         // form in H (k²/2 multiply-adds) when that is cheaper than the triangular product (nf²/2).
         let nf = self.free_count();
         let at_projection = if violations * violations < nf * nf {
-            let mut violated = [(0, 0.0 as Real); NV];
-            let mut k = 0;
-            for i in 0..nf {
-                let var = self.var(i);
-                let z = self.rhs[i].max(lo[var]).min(hi[var]) - self.rhs[i];
-                if z != 0.0 {
-                    violated[k % NV] = (var, z);
-                    k += 1;
-                }
-            }
-            let mut sum = 0.0;
-            for (a, &(va, za)) in violated[..k.min(NV)].iter().enumerate() {
-                let row = &h[va];
-                let mut cross = 0.0;
-                for &(vb, zb) in &violated[..a] {
-                    cross += row[vb] * zb;
-                }
-                sum += za * (row[va] * za + 2.0 * cross);
-            }
-            sum
+            self.projection_form(h, lo, hi)
         } else {
             for i in 0..nf {
                 let var = self.var(i);
@@ -504,6 +485,31 @@ impl<const NV: usize> BoxQp<NV> {
         true
     }
 
+    /// zᵀ H_FF z for z = (the projection of `rhs` onto the box) − `rhs`, which is zero except at
+    /// the violated variables: a quadratic form in H over those only.
+    fn projection_form(&self, h: &[[Real; NV]; NV], lo: &[Real; NV], hi: &[Real; NV]) -> Real {
+        let mut violated = [(0, 0.0 as Real); NV];
+        let mut k = 0;
+        for i in 0..self.free_count() {
+            let var = self.var(i);
+            let z = self.rhs[i].max(lo[var]).min(hi[var]) - self.rhs[i];
+            if z != 0.0 {
+                violated[k % NV] = (var, z);
+                k += 1;
+            }
+        }
+        let mut sum = 0.0;
+        for (a, &(va, za)) in violated[..k.min(NV)].iter().enumerate() {
+            let row = &h[va];
+            let mut cross = 0.0;
+            for &(vb, zb) in &violated[..a] {
+                cross += row[vb] * zb;
+            }
+            sum += za * (row[va] * za + 2.0 * cross);
+        }
+        sum
+    }
+
     /// ‖Lᵀ z‖² for z = target[..nf] (factor order).
     fn factor_norm(&mut self) -> Real {
         let nf = self.free_count();
@@ -523,6 +529,8 @@ impl<const NV: usize> BoxQp<NV> {
     /// iterate not moved since), the last of those stays free: fixing them all would restore the
     /// working set before the release, whose minimiser is the iterate, and cycle; with one of
     /// them free the next step strictly descends (it was released for a negative multiplier).
+    /// (In exact arithmetic that cannot happen — the direction descends, and only the released
+    /// variables have a non-zero gradient, so one of them moves inward — but rounding can.)
     /// Returns false, changing nothing, if at most one variable would be fixed (the caller fixes
     /// the first blocking one as before).
     fn fix_degenerate(
@@ -973,6 +981,62 @@ mod tests {
                 assert!((s - expect).abs() < 1e-12, "(LLᵀ)[{i}][{j}] = {s} vs {expect}");
             }
         }
+    }
+
+    #[test]
+    fn the_restart_tests_sparse_form_matches_the_factor_norm() {
+        let mut rng = Lcg(23);
+        for _ in 0..20 {
+            let (h, _, lo, hi) = random_problem::<10>(&mut rng);
+            let mut qp = BoxQp::<10>::new();
+            qp.state[4] = Bound::Lower;
+            qp.factorize(&h).unwrap();
+            for i in 0..qp.nf {
+                qp.rhs[i] = 2.0 * rng.next();
+            }
+            let sparse = qp.projection_form(&h, &lo, &hi);
+            for i in 0..qp.nf {
+                let var = qp.free[i];
+                qp.target[i] = qp.rhs[i].max(lo[var]).min(hi[var]) - qp.rhs[i];
+            }
+            let dense = qp.factor_norm();
+            assert!(dense > 0.0);
+            assert!((sparse - dense).abs() <= 1e-12 * dense, "{sparse} vs {dense}");
+        }
+    }
+
+    #[test]
+    fn a_zero_length_step_fixes_every_blocking_variable() {
+        // Free variables 0 and 1 sit at their lower bounds, 2 at its upper bound, 3 inside; the
+        // subproblem's minimiser leaves the box at 0 and 2 and moves 1 and 3 inward: both
+        // blocking ones are fixed at once (no release to protect: nothing is fresh).
+        let h = [
+            [4.0, 1.0, 0.0, 0.0],
+            [1.0, 4.0, 1.0, 0.0],
+            [0.0, 1.0, 4.0, 1.0],
+            [0.0, 0.0, 1.0, 4.0],
+        ];
+        let (lo, hi) = ([-1.0; 4], [1.0; 4]);
+        let mut qp = BoxQp::<4>::new();
+        qp.factorize(&h).unwrap();
+        let mut v = [-1.0, -1.0, 1.0, 0.0];
+        for (i, &var) in qp.free[..4].iter().enumerate() {
+            qp.rhs[i] = [-2.0, 0.0, 2.0, 0.5][var];
+        }
+        let mut fresh = [false; 4];
+        assert!(qp.fix_degenerate(&h, &lo, &hi, &mut v, &mut fresh));
+        assert_eq!(qp.state, [Bound::Lower, Bound::Free, Bound::Upper, Bound::Free]);
+        assert_eq!(v, [-1.0, -1.0, 1.0, 0.0]);
+        // If the blocking ones are the whole last release, the last of them stays free; with only
+        // one left to fix, nothing changes here (the caller fixes the first one).
+        let mut qp = BoxQp::<4>::new();
+        qp.factorize(&h).unwrap();
+        for (i, &var) in qp.free[..4].iter().enumerate() {
+            qp.rhs[i] = [-2.0, 0.0, 2.0, 0.5][var];
+        }
+        let mut fresh = [true, false, true, false];
+        assert!(!qp.fix_degenerate(&h, &lo, &hi, &mut v, &mut fresh));
+        assert_eq!(qp.state, [Bound::Free; 4]);
     }
 
     #[test]

@@ -422,26 +422,7 @@ impl<const NV: usize> BoxQp<NV> {
         }
         let nf = self.free_count();
         let at_projection = if violations * violations < nf * nf {
-            let mut violated = [(0, 0.0 as Real); NV];
-            let mut k = 0;
-            for i in 0..nf {
-                let var = self.var(i);
-                let z = self.rhs[i].max(lo[var]).min(hi[var]) - self.rhs[i];
-                if z != 0.0 {
-                    violated[k % NV] = (var, z);
-                    k += 1;
-                }
-            }
-            let mut sum = 0.0;
-            for (a, &(va, za)) in violated[..k.min(NV)].iter().enumerate() {
-                let row = &h[va];
-                let mut cross = 0.0;
-                for &(vb, zb) in &violated[..a] {
-                    cross += row[vb] * zb;
-                }
-                sum += za * (row[va] * za + 2.0 * cross);
-            }
-            sum
+            self.projection_form(h, lo, hi)
         } else {
             for i in 0..nf {
                 let var = self.var(i);
@@ -471,6 +452,35 @@ impl<const NV: usize> BoxQp<NV> {
         }
         true
     }
+    /// zᵀ H_FF z for z = (the projection of `rhs` onto the box) − `rhs`, which is zero except at
+    /// the violated variables: a quadratic form in H over those only.
+    fn projection_form(
+        &self,
+        h: &[[Real; NV]; NV],
+        lo: &[Real; NV],
+        hi: &[Real; NV],
+    ) -> Real {
+        let mut violated = [(0, 0.0 as Real); NV];
+        let mut k = 0;
+        for i in 0..self.free_count() {
+            let var = self.var(i);
+            let z = self.rhs[i].max(lo[var]).min(hi[var]) - self.rhs[i];
+            if z != 0.0 {
+                violated[k % NV] = (var, z);
+                k += 1;
+            }
+        }
+        let mut sum = 0.0;
+        for (a, &(va, za)) in violated[..k.min(NV)].iter().enumerate() {
+            let row = &h[va];
+            let mut cross = 0.0;
+            for &(vb, zb) in &violated[..a] {
+                cross += row[vb] * zb;
+            }
+            sum += za * (row[va] * za + 2.0 * cross);
+        }
+        sum
+    }
     /// ‖Lᵀ z‖² for z = target[..nf] (factor order).
     fn factor_norm(&mut self) -> Real {
         let nf = self.free_count();
@@ -489,6 +499,8 @@ impl<const NV: usize> BoxQp<NV> {
     /// iterate not moved since), the last of those stays free: fixing them all would restore the
     /// working set before the release, whose minimiser is the iterate, and cycle; with one of
     /// them free the next step strictly descends (it was released for a negative multiplier).
+    /// (In exact arithmetic that cannot happen — the direction descends, and only the released
+    /// variables have a non-zero gradient, so one of them moves inward — but rounding can.)
     /// Returns false, changing nothing, if at most one variable would be fixed (the caller fixes
     /// the first blocking one as before).
     fn fix_degenerate(
