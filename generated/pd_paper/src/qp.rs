@@ -121,6 +121,11 @@ fn dot4(a: &[Real], b: [&[Real]; 4]) -> [Real; 4] {
 const RESTART_VIOLATIONS: usize = 2;
 /// Projection restarts per solve (each costs a partial refactorisation).
 const MAX_RESTARTS: usize = 30;
+/// Variables freed per iteration at most (those with the most negative multipliers): freeing
+/// every one at once after a reference jump mostly frees variables that the next projection
+/// restart fixes again, each at the cost of a row of the factor. 6 gave the smallest slowest step
+/// of 6, 8 and unbounded on the shipped models (docs/benchmarks.md).
+const RELEASE_CAP: usize = 6;
 /// A fresh factorisation orders the free variables last stage first.
 const REVERSED_ORDER: bool = true;
 /// Relative pivot tolerance of the factorisation.
@@ -648,22 +653,37 @@ impl<const NV: usize> BoxQp<NV> {
                 self.remove(p);
                 continue;
             }
-            let mut released = 0;
-            fresh = [false; NV];
-            let kept = self.free_count();
+            let mut chosen = [(0.0 as Real, NV); RELEASE_CAP];
             for j in 0..NV {
                 let sign = match self.state[j] {
                     Bound::Free => continue,
                     Bound::Lower => 1.0,
                     Bound::Upper => -1.0,
                 };
-                if sign * (g[j] + dot(&h[j], &v[..])) < -tolerance {
-                    self.free[(kept + released) % NV] = j;
-                    self.state[j] = Bound::Free;
-                    self.add_fixed(h, j, -v[j]);
-                    fresh[j] = true;
-                    released += 1;
+                let mut entry = (sign * (g[j] + dot(&h[j], &v[..])), j);
+                if !(entry.0 < -tolerance) {
+                    continue;
                 }
+                for slot in chosen.iter_mut() {
+                    if slot.1 == NV || entry.0 < slot.0 {
+                        core::mem::swap(slot, &mut entry);
+                        if entry.1 == NV {
+                            break;
+                        }
+                    }
+                }
+            }
+            chosen.sort_unstable_by_key(|c| c.1);
+            let mut released = 0;
+            fresh = [false; NV];
+            let kept = self.free_count();
+            for &(_, j) in chosen.iter().take_while(|c| c.1 < NV) {
+                let j = j % NV;
+                self.free[(kept + released) % NV] = j;
+                self.state[j] = Bound::Free;
+                self.add_fixed(h, j, -v[j]);
+                fresh[j] = true;
+                released += 1;
             }
             if released == 0 {
                 return QpResult {
