@@ -100,6 +100,17 @@ fn within_trust_region(x: &[Real; NX]) -> bool {
     x.iter().zip(&TRUST_BOUND).all(|(v, b)| v.abs() <= *b)
 }
 
+/// x projected onto the trust region, each state clipped to ±`TRUST_BOUND[i]`.
+#[inline]
+#[allow(clippy::manual_clamp)] // `clamp` would pass a NaN through; max/min map it to a bound
+fn into_trust_region(x: &[Real; NX]) -> [Real; NX] {
+    let mut out = *x;
+    for (v, b) in out.iter_mut().zip(&TRUST_BOUND) {
+        *v = v.max(-*b).min(*b);
+    }
+    out
+}
+
 #[inline]
 #[allow(clippy::manual_clamp)] // `clamp` would pass a NaN through; max/min map it to a bound
 fn clamp_input(u: &[Real; NU]) -> [Real; NU] {
@@ -201,15 +212,18 @@ impl Mpc {
 
     /// (Fₖ, Aₖ, Bₖ) at the guess and the defects cₖ = Fₖ − x̄ₖ₊₁; false if anything is not finite.
     /// If a predicted state x̄₁..x̄_N has left the trust region (|x̄ᵢ| ≤ `TRUST_BOUND[i]`), the
-    /// guess's states are first replaced by the rollout of its inputs from x̄₀, x̄ₖ₊₁ = Fₖ (all
-    /// defects zero): at no extra cost, since Fₖ is computed here anyway.
+    /// guess's states are first replaced by the rollout of its inputs from x̄₀, projected onto the
+    /// trust region at every stage, x̄ₖ₊₁ = clip(Fₖ) (defects zero where nothing was clipped): at
+    /// no extra cost, since Fₖ is computed here anyway. Unprojected, the rollout itself could run
+    /// into the model's singularity (pd_m100: the 1-substep RK4 map from pitch 1.03 rad at a pitch
+    /// rate of 5.5 rad/s reaches pitch 1.4 and then overflows to NaN).
     fn linearize(&mut self) -> bool {
         let rollout = !self.xs[1..].iter().all(within_trust_region);
         let mut finite = true;
         for k in 0..N {
             let (next, a, b) = discrete_linearization(&self.xs[k], &self.us[k]);
             if rollout {
-                self.xs[k + 1] = next;
+                self.xs[k + 1] = into_trust_region(&next);
             }
             for i in 0..NX {
                 self.c[k][i] = next[i] - self.xs[k + 1][i];
@@ -528,6 +542,36 @@ mod tests {
         for k in 0..N {
             assert_eq!(rolled[k + 1], discrete_dynamics(&rolled[k], &us[k]), "stage {k}");
         }
+    }
+
+    #[test]
+    fn the_rollout_is_projected_onto_the_trust_region() {
+        // From x₀ = 1.9 (bound 2) moving at 3 with full input, the oscillator's rollout leaves the
+        // trust region within a step: each stage's state is clipped back to the bound, and the defect
+        // is what was clipped (zero where nothing was).
+        let us = [[U_MAX[0]]; N];
+        let mut xs = [[1.9, 3.0]; N + 1];
+        xs[N][0] = 2.0 * TRUST_BOUND[0];
+        let mut mpc = Mpc::new();
+        assert!(mpc.set_guess(&xs, &us));
+        assert_eq!(mpc.prepare(&reference(0.5)), Status::Solved);
+        let rolled = *mpc.predicted_states();
+        let mut clipped = 0;
+        for k in 0..N {
+            let next = discrete_dynamics(&rolled[k], &us[k]);
+            assert!(rolled[k + 1][0].abs() <= TRUST_BOUND[0], "stage {k}");
+            assert_eq!(rolled[k + 1][1], next[1], "stage {k}");
+            if next[0].abs() > TRUST_BOUND[0] {
+                clipped += 1;
+                assert_eq!(rolled[k + 1][0], TRUST_BOUND[0].copysign(next[0]), "stage {k}");
+                assert_eq!(mpc.c[k][0], next[0] - rolled[k + 1][0], "stage {k}");
+            } else {
+                assert_eq!(rolled[k + 1][0], next[0], "stage {k}");
+                assert_eq!(mpc.c[k][0], 0.0, "stage {k}");
+            }
+        }
+        assert!(clipped > 0);
+        assert!(mpc.feedback(&xs[0]).status == Status::Solved);
     }
 
     #[test]

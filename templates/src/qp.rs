@@ -125,6 +125,11 @@ fn dot4(a: &[Real], b: [&[Real]; 4]) -> [Real; 4] {
 const RESTART_VIOLATIONS: usize = 2;
 /// Projection restarts per solve (each costs a partial refactorisation).
 const MAX_RESTARTS: usize = 30;
+/// Variables freed per iteration at most (those with the most negative multipliers): freeing
+/// every one at once after a reference jump mostly frees variables that the next projection
+/// restart fixes again, each at the cost of a row of the factor. 6 gave the smallest slowest step
+/// of 6, 8 and unbounded on the shipped models (docs/benchmarks.md).
+const RELEASE_CAP: usize = 6;
 /// A fresh factorisation orders the free variables last stage first.
 const REVERSED_ORDER: bool = true;
 
@@ -388,38 +393,6 @@ impl<const NV: usize> BoxQp<NV> {
         }
     }
 
-    /// Append variable `var` as the last free variable: with c = H_{F,var},
-    /// L l = c, d = √(H_var,var − lᵀl).
-    fn append(&mut self, h: &[[Real; NV]; NV], var: usize) -> Result<(), QpStatus> {
-        let nf = self.free_count();
-        if nf >= NV {
-            return Err(QpStatus::NotPositiveDefinite);
-        }
-        let hv = &h[var];
-        let start = self.row_starts();
-        let gv = self.group[var];
-        // l = L⁻¹ c by forward substitution, built in `target` (exactly zero in the rows of
-        // other components).
-        for i in 0..nf {
-            if start.is_some() && self.group[self.var(i)] != gv {
-                self.target[i] = 0.0;
-                continue;
-            }
-            let row = &self.l[i];
-            let s = start.as_ref().map_or(0, |st| st[i]).min(i);
-            self.target[i] = (hv[self.var(i)] - dot(&row[s..i], &self.target[s..i])) / row[i];
-        }
-        let d = hv[var] - dot(&self.target[..nf], &self.target[..nf]);
-        if !(d > PIVOT_TOLERANCE * hv[var].abs()) {
-            return Err(QpStatus::NotPositiveDefinite);
-        }
-        self.l[nf][..nf].copy_from_slice(&self.target[..nf]);
-        self.l[nf][nf] = sqrt(d);
-        self.free[nf % NV] = var;
-        self.nf += 1;
-        Ok(())
-    }
-
     /// Remove free position `p` from the factor. With L = [L11 0 0; l21ᵀ l22 0; L31 l32 L33],
     /// the factor of H_FF without p is [L11 0; L31 L33'] with L33' L33'ᵀ = L33 L33ᵀ + l32 l32ᵀ
     /// (a rank-one update by rotations).
@@ -480,14 +453,20 @@ impl<const NV: usize> BoxQp<NV> {
         if violations < RESTART_VIOLATIONS {
             return false;
         }
-        // On F (v_W fixed) the objective is q(x*) + ½ ‖Lᵀ (x − x*)‖², x* = rhs: compare the
-        // projection p with v by that (two triangular products instead of two products with H).
+        // On F (v_W fixed) the objective is q(x*) + ½ (x − x*)ᵀ H_FF (x − x*), x* = rhs, and
+        // (x − x*)ᵀ H_FF (x − x*) = ‖Lᵀ (x − x*)‖²: compare the projection p with v by that.
+        // p − x* is zero except at the k violated variables, so its term is a k × k quadratic
+        // form in H (k²/2 multiply-adds) when that is cheaper than the triangular product (nf²/2).
         let nf = self.free_count();
-        for i in 0..nf {
-            let var = self.var(i);
-            self.target[i] = self.rhs[i].max(lo[var]).min(hi[var]) - self.rhs[i];
-        }
-        let at_projection = self.factor_norm();
+        let at_projection = if violations * violations < nf * nf {
+            self.projection_form(h, lo, hi)
+        } else {
+            for i in 0..nf {
+                let var = self.var(i);
+                self.target[i] = self.rhs[i].max(lo[var]).min(hi[var]) - self.rhs[i];
+            }
+            self.factor_norm()
+        };
         for i in 0..nf {
             self.target[i] = v[self.var(i)] - self.rhs[i];
         }
@@ -511,6 +490,31 @@ impl<const NV: usize> BoxQp<NV> {
         true
     }
 
+    /// zᵀ H_FF z for z = (the projection of `rhs` onto the box) − `rhs`, which is zero except at
+    /// the violated variables: a quadratic form in H over those only.
+    fn projection_form(&self, h: &[[Real; NV]; NV], lo: &[Real; NV], hi: &[Real; NV]) -> Real {
+        let mut violated = [(0, 0.0 as Real); NV];
+        let mut k = 0;
+        for i in 0..self.free_count() {
+            let var = self.var(i);
+            let z = self.rhs[i].max(lo[var]).min(hi[var]) - self.rhs[i];
+            if z != 0.0 {
+                violated[k % NV] = (var, z);
+                k += 1;
+            }
+        }
+        let mut sum = 0.0;
+        for (a, &(va, za)) in violated[..k.min(NV)].iter().enumerate() {
+            let row = &h[va];
+            let mut cross = 0.0;
+            for &(vb, zb) in &violated[..a] {
+                cross += row[vb] * zb;
+            }
+            sum += za * (row[va] * za + 2.0 * cross);
+        }
+        sum
+    }
+
     /// ‖Lᵀ z‖² for z = target[..nf] (factor order).
     fn factor_norm(&mut self) -> Real {
         let nf = self.free_count();
@@ -522,6 +526,64 @@ impl<const NV: usize> BoxQp<NV> {
             }
         }
         dot(&self.work[..nf], &self.work[..nf])
+    }
+
+    /// At a step of length 0: every free variable that sits at a bound while the direction
+    /// `rhs − v` leaves the box there blocks. Fix all of them at once (objective and iterate
+    /// unchanged) — except that if they include every variable of the last release (`fresh`, the
+    /// iterate not moved since), the last of those stays free: fixing them all would restore the
+    /// working set before the release, whose minimiser is the iterate, and cycle; with one of
+    /// them free the next step strictly descends (it was released for a negative multiplier).
+    /// (In exact arithmetic that cannot happen — the direction descends, and only the released
+    /// variables have a non-zero gradient, so one of them moves inward — but rounding can.)
+    /// Returns false, changing nothing, if at most one variable would be fixed (the caller fixes
+    /// the first blocking one as before).
+    fn fix_degenerate(
+        &mut self,
+        h: &[[Real; NV]; NV],
+        lo: &[Real; NV],
+        hi: &[Real; NV],
+        v: &mut [Real; NV],
+        fresh: &mut [bool; NV],
+    ) -> bool {
+        let nf = self.free_count();
+        // Free position i (variable var) sits at the bound its direction leaves by.
+        let blocks = |rhs: &[Real; NV], v: &[Real; NV], i: usize, var: usize| {
+            let d = rhs[i % NV] - v[var];
+            (d < 0.0 && v[var] <= lo[var]) || (d > 0.0 && v[var] >= hi[var])
+        };
+        let (mut blocking, mut fresh_blocking, mut keep) = (0, 0, NV);
+        for i in 0..nf {
+            let var = self.var(i);
+            if blocks(&self.rhs, v, i, var) {
+                blocking += 1;
+                if fresh[var] {
+                    fresh_blocking += 1;
+                    keep = var;
+                }
+            }
+        }
+        if fresh_blocking == 0 || fresh_blocking < fresh.iter().filter(|f| **f).count() {
+            keep = NV;
+        }
+        if blocking - usize::from(keep < NV) < 2 {
+            return false;
+        }
+        for i in 0..nf {
+            let var = self.var(i);
+            if var != keep && blocks(&self.rhs, v, i, var) {
+                let bound = if self.rhs[i] < v[var] {
+                    Bound::Lower
+                } else {
+                    Bound::Upper
+                };
+                v[var] = if bound == Bound::Lower { lo[var] } else { hi[var] };
+                self.state[var] = bound;
+                fresh[var] = false;
+                self.add_fixed(h, var, v[var]);
+            }
+        }
+        true
     }
 
     /// `fixed_gradient` += H_{·,var} value (H is symmetric: its row `var`).
@@ -562,6 +624,8 @@ impl<const NV: usize> BoxQp<NV> {
         let tolerance = 10.0 * Real::EPSILON * scale;
         let mut iterations = 0;
         let mut restarts = 0;
+        // The variables freed by the last release, while the iterate has not moved since.
+        let mut fresh = [false; NV];
         while iterations < max_iterations {
             iterations += 1;
             // rhs = −(g_F + H_FW v_W)
@@ -576,6 +640,7 @@ impl<const NV: usize> BoxQp<NV> {
             // increase the objective. At most MAX_RESTARTS times per solve.
             if restarts < MAX_RESTARTS && self.try_projection_restart(h, lo, hi, v) {
                 restarts += 1;
+                fresh = [false; NV];
                 if self.drop_fixed(h).is_err() {
                     return QpResult {
                         status: QpStatus::NotPositiveDefinite,
@@ -607,41 +672,78 @@ impl<const NV: usize> BoxQp<NV> {
                 let var = self.var(i);
                 v[var] += alpha * (self.rhs[i] - v[var]);
             }
+            if alpha > 0.0 {
+                fresh = [false; NV];
+            }
             if let Some((p, bound)) = blocking {
+                // A step of length 0 with several blocking variables (typically after a release
+                // of several variables, some of which the joint direction pushes out again):
+                // fix them all at once instead of one per iteration.
+                if alpha == 0.0 && self.fix_degenerate(h, lo, hi, v, &mut fresh) {
+                    if self.drop_fixed(h).is_err() {
+                        return QpResult {
+                            status: QpStatus::NotPositiveDefinite,
+                            iterations,
+                        };
+                    }
+                    continue;
+                }
                 let var = self.var(p);
                 v[var] = if bound == Bound::Lower { lo[var] } else { hi[var] };
                 self.state[var] = bound;
+                fresh[var] = false;
                 self.add_fixed(h, var, v[var]);
                 self.remove(p);
                 continue;
             }
-            // At the subproblem's minimiser: multipliers of the working set. Every
-            // variable with a negative multiplier is freed (each an O(n²) append):
-            // the subproblem on the larger free set has a lower minimum, and the
-            // step towards it is a descent direction that the step rule keeps
-            // feasible.
-            let mut released = 0;
+            // At the subproblem's minimiser: multipliers of the working set. The variables with
+            // the RELEASE_CAP most negative multipliers are freed: the subproblem on the larger
+            // free set has a lower minimum, and the step towards it is a descent direction that
+            // the step rule keeps feasible. Their rows are appended to the factor together
+            // (`factor_rows` from the old nf, four entries at a time): the factor one append
+            // each would give, up to rounding.
+            let mut chosen = [(0.0 as Real, NV); RELEASE_CAP]; // most negative first; NV: empty
             for j in 0..NV {
                 let sign = match self.state[j] {
                     Bound::Free => continue,
                     Bound::Lower => 1.0,
                     Bound::Upper => -1.0,
                 };
-                if sign * (g[j] + dot(&h[j], &v[..])) < -tolerance {
-                    if self.append(h, j).is_err() {
-                        return QpResult {
-                            status: QpStatus::NotPositiveDefinite,
-                            iterations,
-                        };
-                    }
-                    self.state[j] = Bound::Free;
-                    self.add_fixed(h, j, -v[j]);
-                    released += 1;
+                let mut entry = (sign * (g[j] + dot(&h[j], &v[..])), j);
+                if !(entry.0 < -tolerance) {
+                    continue;
                 }
+                for slot in chosen.iter_mut() {
+                    if slot.1 == NV || entry.0 < slot.0 {
+                        core::mem::swap(slot, &mut entry);
+                        if entry.1 == NV {
+                            break;
+                        }
+                    }
+                }
+            }
+            chosen.sort_unstable_by_key(|c| c.1);
+            let mut released = 0;
+            fresh = [false; NV];
+            let kept = self.free_count();
+            for &(_, j) in chosen.iter().take_while(|c| c.1 < NV) {
+                let j = j % NV; // < NV already; keeps the indexing below free of bounds checks
+                self.free[(kept + released) % NV] = j;
+                self.state[j] = Bound::Free;
+                self.add_fixed(h, j, -v[j]);
+                fresh[j] = true;
+                released += 1;
             }
             if released == 0 {
                 return QpResult {
                     status: QpStatus::Optimal,
+                    iterations,
+                };
+            }
+            self.nf = (kept + released).min(NV);
+            if self.factor_rows(h, kept).is_err() {
+                return QpResult {
+                    status: QpStatus::NotPositiveDefinite,
                     iterations,
                 };
             }
@@ -900,6 +1002,62 @@ mod tests {
     }
 
     #[test]
+    fn the_restart_tests_sparse_form_matches_the_factor_norm() {
+        let mut rng = Lcg(23);
+        for _ in 0..20 {
+            let (h, _, lo, hi) = random_problem::<10>(&mut rng);
+            let mut qp = BoxQp::<10>::new();
+            qp.state[4] = Bound::Lower;
+            qp.factorize(&h).unwrap();
+            for i in 0..qp.nf {
+                qp.rhs[i] = 2.0 * rng.next();
+            }
+            let sparse = qp.projection_form(&h, &lo, &hi);
+            for i in 0..qp.nf {
+                let var = qp.free[i];
+                qp.target[i] = qp.rhs[i].max(lo[var]).min(hi[var]) - qp.rhs[i];
+            }
+            let dense = qp.factor_norm();
+            assert!(dense > 0.0);
+            assert!((sparse - dense).abs() <= 1e-12 * dense, "{sparse} vs {dense}");
+        }
+    }
+
+    #[test]
+    fn a_zero_length_step_fixes_every_blocking_variable() {
+        // Free variables 0 and 1 sit at their lower bounds, 2 at its upper bound, 3 inside; the
+        // subproblem's minimiser leaves the box at 0 and 2 and moves 1 and 3 inward: both
+        // blocking ones are fixed at once (no release to protect: nothing is fresh).
+        let h = [
+            [4.0, 1.0, 0.0, 0.0],
+            [1.0, 4.0, 1.0, 0.0],
+            [0.0, 1.0, 4.0, 1.0],
+            [0.0, 0.0, 1.0, 4.0],
+        ];
+        let (lo, hi) = ([-1.0; 4], [1.0; 4]);
+        let mut qp = BoxQp::<4>::new();
+        qp.factorize(&h).unwrap();
+        let mut v = [-1.0, -1.0, 1.0, 0.0];
+        for (i, &var) in qp.free[..4].iter().enumerate() {
+            qp.rhs[i] = [-2.0, 0.0, 2.0, 0.5][var];
+        }
+        let mut fresh = [false; 4];
+        assert!(qp.fix_degenerate(&h, &lo, &hi, &mut v, &mut fresh));
+        assert_eq!(qp.state, [Bound::Lower, Bound::Free, Bound::Upper, Bound::Free]);
+        assert_eq!(v, [-1.0, -1.0, 1.0, 0.0]);
+        // If the blocking ones are the whole last release, the last of them stays free; with only
+        // one left to fix, nothing changes here (the caller fixes the first one).
+        let mut qp = BoxQp::<4>::new();
+        qp.factorize(&h).unwrap();
+        for (i, &var) in qp.free[..4].iter().enumerate() {
+            qp.rhs[i] = [-2.0, 0.0, 2.0, 0.5][var];
+        }
+        let mut fresh = [true, false, true, false];
+        assert!(!qp.fix_degenerate(&h, &lo, &hi, &mut v, &mut fresh));
+        assert_eq!(qp.state, [Bound::Free; 4]);
+    }
+
+    #[test]
     fn factor_updates_match_a_fresh_factorisation() {
         let mut rng = Lcg(3);
         let (h, _, _, _) = random_problem::<8>(&mut rng);
@@ -911,7 +1069,10 @@ mod tests {
         qp.remove(3);
         qp.state[qp.free[0]] = Bound::Upper;
         qp.remove(0);
-        qp.append(&h, back).unwrap();
+        // Appended as a release does: as the last free variable, its row by `factor_rows`.
+        qp.free[qp.nf] = back;
+        qp.nf += 1;
+        qp.factor_rows(&h, qp.nf - 1).unwrap();
         qp.state[back] = Bound::Free;
         // L Lᵀ must equal H_FF in the solver's order.
         for i in 0..qp.nf {

@@ -118,6 +118,16 @@ fn within_envelope(x: &[Real; NX]) -> bool {
 fn within_trust_region(x: &[Real; NX]) -> bool {
     x.iter().zip(&TRUST_BOUND).all(|(v, b)| v.abs() <= *b)
 }
+/// x projected onto the trust region, each state clipped to ±`TRUST_BOUND[i]`.
+#[inline]
+#[allow(clippy::manual_clamp)]
+fn into_trust_region(x: &[Real; NX]) -> [Real; NX] {
+    let mut out = *x;
+    for (v, b) in out.iter_mut().zip(&TRUST_BOUND) {
+        *v = v.max(-*b).min(*b);
+    }
+    out
+}
 #[inline]
 #[allow(clippy::manual_clamp)]
 fn clamp_input(u: &[Real; NU]) -> [Real; NU] {
@@ -216,15 +226,18 @@ impl Mpc {
     }
     /// (Fₖ, Aₖ, Bₖ) at the guess and the defects cₖ = Fₖ − x̄ₖ₊₁; false if anything is not finite.
     /// If a predicted state x̄₁..x̄_N has left the trust region (|x̄ᵢ| ≤ `TRUST_BOUND[i]`), the
-    /// guess's states are first replaced by the rollout of its inputs from x̄₀, x̄ₖ₊₁ = Fₖ (all
-    /// defects zero): at no extra cost, since Fₖ is computed here anyway.
+    /// guess's states are first replaced by the rollout of its inputs from x̄₀, projected onto the
+    /// trust region at every stage, x̄ₖ₊₁ = clip(Fₖ) (defects zero where nothing was clipped): at
+    /// no extra cost, since Fₖ is computed here anyway. Unprojected, the rollout itself could run
+    /// into the model's singularity (pd_m100: the 1-substep RK4 map from pitch 1.03 rad at a pitch
+    /// rate of 5.5 rad/s reaches pitch 1.4 and then overflows to NaN).
     fn linearize(&mut self) -> bool {
         let rollout = !self.xs[1..].iter().all(within_trust_region);
         let mut finite = true;
         for k in 0..N {
             let (next, a, b) = discrete_linearization(&self.xs[k], &self.us[k]);
             if rollout {
-                self.xs[k + 1] = next;
+                self.xs[k + 1] = into_trust_region(&next);
             }
             for i in 0..NX {
                 self.c[k][i] = next[i] - self.xs[k + 1][i];

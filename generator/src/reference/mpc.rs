@@ -340,7 +340,8 @@ impl GenericMpc {
 
     /// (Fₖ, Aₖ, Bₖ) = discrete_linearization(x̄ₖ, ūₖ), cₖ = Fₖ − x̄ₖ₊₁. If a predicted state
     /// x̄₁..x̄_N is outside the trust region, the states are first replaced by the rollout
-    /// x̄ₖ₊₁ = Fₖ from x̄₀ (all defects zero), as the generated solver does.
+    /// x̄ₖ₊₁ = clip(Fₖ) from x̄₀, projected onto the trust region at every stage (defects zero
+    /// where nothing was clipped), as the generated solver does.
     fn linearize(&mut self) -> Result<Linearization, ReferenceError> {
         let trust = &self.trust;
         let rollout = !self.x_guess[1..]
@@ -355,7 +356,10 @@ impl GenericMpc {
         for k in 0..p.horizon {
             let (f, a, b) = discrete_linearization(&self.ir, &self.x_guess[k], &self.u_guess[k], p.dt, p.substeps);
             if rollout {
-                self.x_guess[k + 1].copy_from_slice(&f);
+                // Projected onto the trust region at every stage, as the generated solver does.
+                for ((x, fi), bound) in self.x_guess[k + 1].iter_mut().zip(&f).zip(trust) {
+                    *x = fi.max(-*bound).min(*bound);
+                }
             }
             let c: Vec<f64> = f.iter().zip(&self.x_guess[k + 1]).map(|(fi, xi)| fi - xi).collect();
             if !(c.iter().all(|v| v.is_finite()) && a.iter().all(|v| v.is_finite()) && b.iter().all(|v| v.is_finite()))
