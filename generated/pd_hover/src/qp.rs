@@ -477,10 +477,10 @@ impl<const NV: usize> BoxQp<NV> {
         }
         let mut sum = 0.0;
         for (a, &(va, za)) in violated[..k.min(NV)].iter().enumerate() {
-            let row = &h[va];
+            let (va, row) = (va % NV, &h[va % NV]);
             let mut cross = 0.0;
             for &(vb, zb) in &violated[..a] {
-                cross += row[vb] * zb;
+                cross += row[vb % NV] * zb;
             }
             sum += za * (row[va] * za + 2.0 * cross);
         }
