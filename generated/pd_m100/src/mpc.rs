@@ -67,9 +67,10 @@ pub struct Mpc {
     us: [[Real; NU]; N],
     /// u₋₁: the input applied over the sample before stage 0 (where the rate term Δ₀ starts).
     u_prev: [Real; NU],
-    /// diag(S) of the rate term: `R_DELTA` (a field only so that the template's tests can compare
-    /// with the stage-wise solver, which has no rate term, at S = 0).
-    rate_weights: [Real; NU],
+    /// The rate term switched off (S = 0), only so that the template's tests can compare with the
+    /// stage-wise solver, which has none. A flag rather than a copy of `R_DELTA`: `new()` must stay
+    /// all zero bits, so that a `static` solver lives in .bss, not in flash-copied .data.
+    rate_term_off: bool,
     reference: [[Real; NX]; N + 1],
     has_reference: bool,
     /// Aₖ = ∂F/∂x, Bₖ = ∂F/∂u at the guess; cₖ = F(x̄ₖ, ūₖ) − x̄ₖ₊₁.
@@ -144,7 +145,7 @@ impl Mpc {
             xs: [[0.0; NX]; N + 1],
             us: [[0.0; NU]; N],
             u_prev: [0.0; NU],
-            rate_weights: R_DELTA,
+            rate_term_off: false,
             reference: [[0.0; NX]; N + 1],
             has_reference: false,
             a: [[[0.0; NX]; NX]; N],
@@ -292,7 +293,7 @@ impl Mpc {
     fn add_rate_hessian(&mut self) {
         for k in 0..N {
             for r in 0..NU {
-                let s = self.rate_weights[r];
+                let s = self.rate_weight(r);
                 if s == 0.0 || is_sent(k, r) {
                     continue;
                 }
@@ -310,8 +311,13 @@ impl Mpc {
     #[cfg(test)]
     #[allow(dead_code)]
     pub(crate) fn without_rate_term(mut self) -> Self {
-        self.rate_weights = [0.0; NU];
+        self.rate_term_off = true;
         self
+    }
+    /// diag(S)ᵣ: `R_DELTA[r]`, or 0 with the rate term off.
+    #[inline]
+    fn rate_weight(&self, r: usize) -> Real {
+        if self.rate_term_off { 0.0 } else { R_DELTA[r] }
     }
     /// Δ̄ₖ,ᵣ = ūₖ,ᵣ − ūₖ₋₁,ᵣ of the guess (ū₋₁ = u₋₁).
     #[inline]
@@ -360,7 +366,7 @@ impl Mpc {
                 cost
                     += 0.5
                         * (R[i] * self.us[k][i] * self.us[k][i]
-                            + self.rate_weights[i] * d * d);
+                            + self.rate_weight(i) * d * d);
             }
         }
         if cost.is_finite() { cost } else { Real::MAX }
@@ -421,7 +427,7 @@ impl Mpc {
                 } else {
                     let later = if j + 1 < N { self.rate(j + 1, r) } else { 0.0 };
                     R[r] * self.us[j][r]
-                        + self.rate_weights[r] * (self.rate(j, r) - later)
+                        + self.rate_weight(r) * (self.rate(j, r) - later)
                 };
             }
             let gj = kernels::bt_x_add(&self.b[j], &p, &ru);
