@@ -172,6 +172,14 @@ fn zeroed_storage() -> Vec<u128> {
     vec![0u128; capi::STORAGE_SIZE.div_ceil(16) + 1]
 }
 
+/// `{ a, b, … }`, a C initialiser.
+fn c_ints(v: &[usize]) -> String {
+    format!(
+        "{{ {} }}",
+        v.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")
+    )
+}
+
 #[test]
 fn sizes_fit_the_header() {
     assert!(capi::sindy_m100_storage_size() <= capi::STORAGE_SIZE);
@@ -184,6 +192,12 @@ fn sizes_fit_the_header() {
         format!("#define SINDY_M100_NU {NU}"),
         format!("#define SINDY_M100_N {N}"),
         format!("SINDY_M100_NOT_INITIALISED = {},", status::NOT_INITIALISED),
+        // The delays a C flight stack compensates, as the Rust crate's (u_vz: 4 samples).
+        format!(
+            "#define SINDY_M100_INPUT_DELAY_SAMPLES {}",
+            c_ints(&sindy_m100::INPUT_DELAY_SAMPLES)
+        ),
+        format!("#define SINDY_M100_INPUT_LEAD {}", c_ints(&sindy_m100::INPUT_LEAD)),
     ] {
         assert!(header.contains(&line), "the header lacks {line:?}");
     }

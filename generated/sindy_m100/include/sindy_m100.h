@@ -45,6 +45,13 @@ extern "C" {
 /* Input bounds (initialisers of sindy_m100_real[SINDY_M100_NU]). */
 #define SINDY_M100_U_MIN { -5.0, -0.611, -0.611, -2.6179938779914944 }
 #define SINDY_M100_U_MAX { 5.0, 0.611, 0.611, 2.6179938779914944 }
+/* Input delays in samples (the model's corrections.latency, rounded) and each input's lead over the
+ * delay all inputs share (initialisers of int[SINDY_M100_NU]). Give the solver the state predicted over
+ * the shared delay min(INPUT_DELAY_SAMPLES) with the inputs already sent; the solver handles the
+ * leads (it holds each input's commands already sent and returns the one for now). uavgen's
+ * docs/runtime.md, "Input delays". */
+#define SINDY_M100_INPUT_DELAY_SAMPLES { 4, 0, 0, 0 }
+#define SINDY_M100_INPUT_LEAD { 4, 0, 0, 0 }
 
 /* Caller-owned solver storage: an upper bound of the solver's size (sindy_m100_storage_size() returns
  * the exact size) and its alignment. */

@@ -224,6 +224,20 @@ impl CApi<'_> {
         let states = model.states.join(", ");
         let inputs = model.inputs.join(", ");
         let names = |v: &[String]| v.iter().map(|s| c_string(s)).collect::<Vec<_>>().join(", ");
+        // As the Rust crate's INPUT_DELAY_SAMPLES and INPUT_LEAD (lib_rs::dims_values).
+        let delay_samples: Vec<usize> = model
+            .input_delays()
+            .iter()
+            .map(|d| (d * self.options.rate_hz).round() as usize)
+            .collect();
+        let shared = delay_samples.iter().copied().min().unwrap_or(0);
+        let input_lead: Vec<usize> = delay_samples.iter().map(|d| d - shared).collect();
+        let int_array = |v: &[usize]| {
+            format!(
+                "{{ {} }}",
+                v.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")
+            )
+        };
         h.push_str(&format!(
             r#"
 /*
@@ -268,6 +282,13 @@ extern "C" {{
 /* Input bounds (initialisers of {p}_real[{up}_NU]). */
 #define {up}_U_MIN {u_min}
 #define {up}_U_MAX {u_max}
+/* Input delays in samples (the model's corrections.latency, rounded) and each input's lead over the
+ * delay all inputs share (initialisers of int[{up}_NU]). Give the solver the state predicted over
+ * the shared delay min(INPUT_DELAY_SAMPLES) with the inputs already sent; the solver handles the
+ * leads (it holds each input's commands already sent and returns the one for now). uavgen's
+ * docs/runtime.md, "Input delays". */
+#define {up}_INPUT_DELAY_SAMPLES {delay_samples}
+#define {up}_INPUT_LEAD {input_lead}
 
 /* Caller-owned solver storage: an upper bound of the solver's size ({p}_storage_size() returns
  * the exact size) and its alignment. */
@@ -305,6 +326,8 @@ enum {p}_status_code {{
             input_names = names(&model.inputs),
             u_min = c_array(&self.mpc.u_min, float),
             u_max = c_array(&self.mpc.u_max, float),
+            delay_samples = int_array(&delay_samples),
+            input_lead = int_array(&input_lead),
             align = STORAGE_ALIGN,
             codes = STATUS_CODES
                 .iter()
