@@ -224,14 +224,9 @@ impl CApi<'_> {
         let states = model.states.join(", ");
         let inputs = model.inputs.join(", ");
         let names = |v: &[String]| v.iter().map(|s| c_string(s)).collect::<Vec<_>>().join(", ");
-        // As the Rust crate's INPUT_DELAY_SAMPLES and INPUT_LEAD (lib_rs::dims_values).
-        let delay_samples: Vec<usize> = model
-            .input_delays()
-            .iter()
-            .map(|d| (d * self.options.rate_hz).round() as usize)
-            .collect();
-        let shared = delay_samples.iter().copied().min().unwrap_or(0);
-        let input_lead: Vec<usize> = delay_samples.iter().map(|d| d - shared).collect();
+        // As the Rust crate's INPUT_DELAY_SAMPLES and INPUT_LEAD.
+        let delay_samples = crate::ir::delay_samples(&model.input_delays(), 1.0 / self.options.rate_hz);
+        let input_lead = crate::ir::input_lead(&delay_samples);
         let int_array = |v: &[usize]| {
             format!(
                 "{{ {} }}",

@@ -30,12 +30,10 @@ pub fn dims_values(
         let l = Literal::usize_unsuffixed(n);
         quote!(#l)
     };
-    // Whole samples at the generation rate: round(delay · rate).
-    let samples: Vec<usize> = delays.iter().map(|d| (d * options.rate_hz).round() as usize).collect();
-    let delay_samples = samples.iter().map(|&d| lit(d));
-    // The lead of each channel over the delay all channels share (docs/mpc.md "Input delays").
-    let shared = samples.iter().copied().min().unwrap_or(0);
-    let input_lead = samples.iter().map(|&d| lit(d - shared));
+    // Whole samples at the generation rate, and each channel's lead over the shared delay.
+    let samples = crate::ir::delay_samples(delays, 1.0 / options.rate_hz);
+    let input_lead = crate::ir::input_lead(&samples).into_iter().map(lit);
+    let delay_samples = samples.into_iter().map(lit);
     // The guess's trust region: unbounded states are `Real::INFINITY`.
     let trust = options
         .envelope

@@ -7,6 +7,19 @@ mod sindy;
 use crate::model::{Dynamics, Model};
 use crate::symbolic::{jacobian, Graph, Id, Tape};
 
+/// Input delays (s) in whole samples of `dt`: round(delay / dt), the generated crate's
+/// `INPUT_DELAY_SAMPLES` (and the C header's, the runtime's compensator's, `track --generic`'s).
+pub fn delay_samples(delays: &[f64], dt: f64) -> Vec<usize> {
+    delays.iter().map(|d| (d / dt).round() as usize).collect()
+}
+
+/// Each input's lead over the delay every input shares: dᵢ − minⱼ dⱼ, the generated crate's
+/// `INPUT_LEAD` (docs/mpc.md "Input delays").
+pub fn input_lead(samples: &[usize]) -> Vec<usize> {
+    let shared = samples.iter().copied().min().unwrap_or(0);
+    samples.iter().map(|d| d - shared).collect()
+}
+
 /// A model lowered to the symbolic graph. Graph variables are the states
 /// (0..NX) followed by the inputs (NX..NX+NU). For a model with `corrections`
 /// the states include the extra states (see [`corrections`]).
@@ -70,12 +83,10 @@ impl ModelIr {
         }
     }
 
-    /// Each input's lead over the delay every input shares, in samples of `dt`: dᵢ − minⱼ dⱼ with
-    /// dᵢ = round(delayᵢ / dt) (the generated crate's `INPUT_LEAD`; docs/mpc.md "Input delays").
+    /// Each input's lead over the delay every input shares, in samples of `dt` ([`input_lead`] of
+    /// [`delay_samples`]).
     pub fn input_lead(&self, dt: f64) -> Vec<usize> {
-        let samples: Vec<usize> = self.input_delays.iter().map(|d| (d / dt).round() as usize).collect();
-        let shared = samples.iter().copied().min().unwrap_or(0);
-        samples.iter().map(|d| d - shared).collect()
+        input_lead(&delay_samples(&self.input_delays, dt))
     }
 
     fn vars(&self, x: &[f64], u: &[f64]) -> Vec<f64> {

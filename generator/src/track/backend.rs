@@ -190,7 +190,7 @@ impl GenericBackend {
             substeps,
             options: options.clone(),
         };
-        let delays: Vec<usize> = model.input_delays().iter().map(|d| (d / dt).round() as usize).collect();
+        let delays = crate::ir::delay_samples(&model.input_delays(), dt);
         Self {
             mpc: GenericMpc::new(ModelIr::new(model), problem),
             options,
