@@ -162,16 +162,29 @@ pub fn to_json(record: &Record, name: &str) -> String {
     )
 }
 
-/// One RTI step, not inlined, so callgrind can count exactly its instructions
-/// (`--toggle-collect` / `--dump-after` on this symbol).
+/// The preparation phase of one RTI step, not inlined: callgrind dumps after it (`--dump-after`),
+/// so each step's count splits into prepare and feedback.
 #[inline(never)]
-pub fn measured_step(mpc: &mut Mpc, reference: &[[Real; NX]; N + 1], x: &[Real; NX]) -> solver::Solution {
-    mpc.prepare(reference);
+pub fn measured_prepare(mpc: &mut Mpc, reference: &[[Real; NX]; N + 1]) -> solver::Status {
+    mpc.prepare(reference)
+}
+
+/// The feedback phase of one RTI step, not inlined (see [`measured_prepare`]).
+#[inline(never)]
+pub fn measured_feedback(mpc: &mut Mpc, x: &[Real; NX]) -> solver::Solution {
     mpc.feedback(x)
 }
 
+/// One RTI step, not inlined, so callgrind can count exactly its instructions (collection is
+/// toggled on this symbol; `uavgen bench` dumps after each of its two phases).
+#[inline(never)]
+pub fn measured_step(mpc: &mut Mpc, reference: &[[Real; NX]; N + 1], x: &[Real; NX]) -> solver::Solution {
+    measured_prepare(mpc, reference);
+    measured_feedback(mpc, x)
+}
+
 /// `steps` deterministic steps of each of the scenario's 3 trajectories (as in [`run`]) through
-/// [`measured_step`]: call number `t · steps + k + 1` is step k of trajectory t.
+/// [`measured_step`]: step number `t · steps + k + 1` is step k of trajectory t.
 pub fn run_for_instruction_count(steps: usize, seed: u64) {
     for which in 0..3 {
         let mut mpc = Mpc::new();
@@ -189,7 +202,7 @@ pub fn run_for_instruction_count(steps: usize, seed: u64) {
 pub const ADVERSARIAL_STEPS: usize = 8;
 
 /// The adversarial search: `trials` randomised cases, each [`ADVERSARIAL_STEPS`] steps through
-/// [`measured_step`] (call number `t · ADVERSARIAL_STEPS + k + 1` is step k of trial t). A trial
+/// [`measured_step`] (step number `t · ADVERSARIAL_STEPS + k + 1` is step k of trial t). A trial
 /// starts the plant at a random point at or near the edge of the generator's envelope (tilt
 /// ±0.6 rad, speed ±5 m/s, rates ±3 rad/s, each component at its bound with probability ½), lets
 /// the solver settle for 30 unmeasured steps on a hover reference, then applies one of: a

@@ -91,6 +91,10 @@ struct BenchArgs {
     /// Scratch directory for the harness crate and its build.
     #[arg(long, default_value = "target/uavgen-bench")]
     work_dir: PathBuf,
+    /// This machine's peak f64 rate in GFlop/s (lanes × FMA units × 2 × clock): with --model, the
+    /// achieved rate of `prepare` is also given as a fraction of it.
+    #[arg(long)]
+    peak_gflops: Option<f64>,
     /// Also write the results as JSON.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -434,6 +438,49 @@ fn check(args: CheckArgs) -> Result<(), String> {
     Ok(())
 }
 
+/// Print the step's arithmetic against its instruction count and time; the same as JSON.
+fn print_work(
+    w: &uavgen::bench::StepWork,
+    timing: &uavgen::bench::HarnessResult,
+    instructions: Option<&uavgen::bench::InstructionCounts>,
+    peak_gflops: Option<f64>,
+) -> serde_json::Value {
+    let flops = w.prepare_flops() as f64;
+    println!(
+        "  work per RTI step (multiply-adds of the emitted code, QP iterations not counted): prepare {} \
+         (linearisation {}, condensing {}, Cholesky ≤ {}), feedback {}; {} flops in all",
+        w.prepare(),
+        w.linearisation,
+        w.condensing,
+        w.cholesky,
+        w.feedback,
+        w.total_flops()
+    );
+    let per_instruction = instructions.map(|c| flops / c.prepare[0] as f64);
+    let gflops = flops / timing.prepare_ns[0];
+    let fraction = peak_gflops.map(|p| gflops / p);
+    let mut line = format!("  prepare: {gflops:.2} GFlop/s at its median time");
+    if let Some(f) = fraction {
+        line += &format!(
+            " ({:.1} % of the {:.1} GFlop/s peak given)",
+            100.0 * f,
+            peak_gflops.unwrap_or(0.0)
+        );
+    }
+    if let Some(r) = per_instruction {
+        line += &format!(", {r:.2} flops per instruction at its median instruction count");
+    }
+    println!("{line}");
+    serde_json::json!({
+        "multiply_adds": w,
+        "prepare_flops": w.prepare_flops(),
+        "total_flops_without_qp_iterations": w.total_flops(),
+        "prepare_gflops_at_median": gflops,
+        "fraction_of_peak": fraction,
+        "prepare_flops_per_instruction": per_instruction,
+    })
+}
+
 fn bench(args: BenchArgs) -> Result<(), String> {
     use uavgen::bench::*;
     if args.steps == 0 {
@@ -452,9 +499,19 @@ fn bench(args: BenchArgs) -> Result<(), String> {
         native: args.native,
         work_dir,
     };
+    if let Some(p) = args.peak_gflops {
+        if !(p.is_finite() && p > 0.0) {
+            return Err(format!("--peak-gflops must be a positive number of GFlop/s, found {p}"));
+        }
+    }
     let dims = read_crate_dims(&args.crate_dir)?;
     let model = match &args.model {
         Some(p) => Some(uavgen::load(p).map_err(|e| e.to_string())?),
+        None => None,
+    };
+    // The step's arithmetic, counted from the code generated for the crate (as `uavgen check`).
+    let work = match &model {
+        Some(m) => step_work(m, &args.crate_dir, &dims)?,
         None => None,
     };
     eprintln!("building the harness for {} ...", args.crate_dir.display());
@@ -493,8 +550,9 @@ fn bench(args: BenchArgs) -> Result<(), String> {
         let c = cli::progress::with_spinner("callgrind", || count_instructions(&binary, &options))?;
         let trajectory = ["sinusoidal", "circular", "spiral"][c.max_at.0.min(2)];
         println!(
-            "  instructions per RTI step (callgrind, {} steps of the scenario): median {}, max {} ({} trajectory, step {})",
-            c.steps, c.median, c.max, trajectory, c.max_at.1
+            "  instructions per RTI step (callgrind, {} steps of the scenario): median {}, max {} ({} trajectory, step {}); \
+             prepare median {}, max {}; feedback median {}, max {}",
+            c.steps, c.median, c.max, trajectory, c.max_at.1, c.prepare[0], c.prepare[1], c.feedback[0], c.feedback[1]
         );
         Some(c)
     } else {
@@ -513,8 +571,17 @@ fn bench(args: BenchArgs) -> Result<(), String> {
         })?;
         let mut c = c;
         println!(
-            "  adversarial search (callgrind, {} steps): median {}, max {} (trial {}, step {}); {outcome}",
-            c.steps, c.median, c.max, c.max_at.0, c.max_at.1
+            "  adversarial search (callgrind, {} steps): median {}, max {} (trial {}, step {}); prepare median {}, max {}; \
+             feedback median {}, max {}; {outcome}",
+            c.steps,
+            c.median,
+            c.max,
+            c.max_at.0,
+            c.max_at.1,
+            c.prepare[0],
+            c.prepare[1],
+            c.feedback[0],
+            c.feedback[1]
         );
         c.outcome = Some(outcome);
         Some(c)
@@ -536,8 +603,12 @@ fn bench(args: BenchArgs) -> Result<(), String> {
             }
             _ => None,
         };
+    let work_report = work.map(|w| print_work(&w, &timing, instructions.as_ref(), args.peak_gflops));
+    if model.is_some() && work_report.is_none() {
+        println!("  work per RTI step: counted from the emitted kernels of condensed crates only (this crate's QP is stage-wise)");
+    }
     if let Some(path) = &args.json {
-        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "adversarial": adversarial, "generic": generic, "native": options.native });
+        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "adversarial": adversarial, "generic": generic, "native": options.native, "work": work_report });
         let text = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())? + "\n";
         cli::write_atomically(path, &text)?;
     }

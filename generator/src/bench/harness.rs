@@ -22,12 +22,18 @@ pub struct HarnessResult {
     pub pinned: bool,
 }
 
-/// Instructions per RTI step (prepare + feedback) counted by callgrind.
+/// Instructions per RTI step counted by callgrind: the whole step (prepare + feedback) and each
+/// phase on its own.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct InstructionCounts {
     pub steps: usize,
+    /// Median and largest count of the whole step.
     pub median: u64,
     pub max: u64,
+    /// (median, max) of `prepare` alone (independent of x₀: linearisation, condensing, factorisation).
+    pub prepare: [u64; 2],
+    /// (median, max) of `feedback` alone (x₀ known: the QP).
+    pub feedback: [u64; 2],
     /// Where the largest count was: (trajectory 0..3, step), or (trial, step) for the adversarial search.
     pub max_at: (usize, usize),
     /// The adversarial search's status counts and largest QP iteration count.
@@ -144,8 +150,9 @@ pub fn adversarial_outcome(binary: &Path, options: &BenchOptions) -> Result<serd
     serde_json::from_str(text.trim()).map_err(|e| format!("harness output {text:?}: {e}"))
 }
 
-/// Run the harness with `harness_args` under callgrind, one dump per `measured_step` call;
-/// calls are grouped `group` at a time for `max_at`.
+/// Run the harness with `harness_args` under callgrind, collecting inside `measured_step` only and
+/// dumping after each of its two phases (`measured_prepare`, `measured_feedback`): dump 2s − 1 is
+/// step s's prepare, dump 2s its feedback. Steps are grouped `group` at a time for `max_at`.
 fn count_calls(
     binary: &Path,
     options: &BenchOptions,
@@ -161,7 +168,8 @@ fn count_calls(
         .args([
             "--collect-atstart=no",
             "--toggle-collect=*measured_step",
-            "--dump-after=*measured_step",
+            "--dump-after=*measured_prepare",
+            "--dump-after=*measured_feedback",
         ])
         .arg(binary)
         .args(harness_args)
@@ -171,35 +179,88 @@ fn count_calls(
     if !out.status.success() {
         return Err(format!("valgrind failed: {}", String::from_utf8_lossy(&out.stderr)));
     }
-    let mut counts = Vec::new();
+    // Dump number K (cg.out.K) follows the K-th phase; each holds that phase's cost in its
+    // "summary:" line.
+    let mut dumps: Vec<(usize, u64)> = Vec::new();
     for entry in std::fs::read_dir(&dir).map_err(|e| e.to_string())? {
         let path = entry.map_err(|e| e.to_string())?.path();
-        // Dump number K (cg.out.K) follows the K-th call.
-        let call: usize = path
+        let dump: usize = path
             .extension()
             .and_then(|e| e.to_str())
             .and_then(|e| e.parse().ok())
             .unwrap_or(0);
+        if dump == 0 {
+            continue; // the final dump at exit, not a phase
+        }
         let text = std::fs::read_to_string(&path).map_err(|e| e.to_string())?;
-        // Each dump after a call holds that call's cost in its "summary:" line.
         if let Some(n) = text.lines().find_map(|l| l.strip_prefix("summary: ")) {
             let n: u64 = n.split_whitespace().next().and_then(|v| v.parse().ok()).unwrap_or(0);
-            if n > 0 && call > 0 {
-                counts.push((n, call));
-            }
+            dumps.push((dump, n));
         }
     }
-    if counts.is_empty() {
+    split_phases(dumps, group)
+}
+
+/// Pair the phase dumps (dump number, instructions) into steps and summarise them: dump 2s − 1 is
+/// step s's prepare, dump 2s its feedback; steps are grouped `group` at a time for `max_at`.
+fn split_phases(mut dumps: Vec<(usize, u64)>, group: usize) -> Result<InstructionCounts, String> {
+    dumps.sort_unstable();
+    if dumps.is_empty() {
         return Err("callgrind recorded no RTI step".into());
     }
-    counts.sort_unstable();
-    let (max, call) = counts[counts.len() - 1];
-    let steps = group.max(1);
+    if dumps.len() % 2 != 0 || dumps.iter().enumerate().any(|(i, &(d, _))| d != i + 1) {
+        return Err(format!(
+            "callgrind wrote {} phase dumps numbered {}..{}, not a prepare and a feedback per step",
+            dumps.len(),
+            dumps[0].0,
+            dumps[dumps.len() - 1].0
+        ));
+    }
+    let steps: Vec<(u64, u64)> = dumps.chunks_exact(2).map(|p| (p[0].1, p[1].1)).collect();
+    let summary = |mut v: Vec<u64>| -> [u64; 2] {
+        v.sort_unstable();
+        [v[v.len() / 2], v[v.len() - 1]]
+    };
+    let totals: Vec<u64> = steps.iter().map(|(p, f)| p + f).collect();
+    let (max_index, max) = totals
+        .iter()
+        .copied()
+        .enumerate()
+        .max_by_key(|&(i, n)| (n, std::cmp::Reverse(i)))
+        .unwrap_or((0, 0));
+    let group = group.max(1);
     Ok(InstructionCounts {
-        steps: counts.len(),
-        median: counts[counts.len() / 2].0,
+        steps: steps.len(),
+        median: summary(totals.clone())[0],
         max,
-        max_at: ((call - 1) / steps, (call - 1) % steps),
+        prepare: summary(steps.iter().map(|s| s.0).collect()),
+        feedback: summary(steps.iter().map(|s| s.1).collect()),
+        max_at: (max_index / group, max_index % group),
         outcome: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three steps of two phases each: totals 30, 70, 50; the largest is the second step.
+    #[test]
+    fn phases_pair_into_steps() {
+        let dumps = vec![(3, 40), (1, 10), (2, 20), (4, 30), (6, 5), (5, 45)];
+        let c = split_phases(dumps, 2).unwrap();
+        assert_eq!(c.steps, 3);
+        assert_eq!((c.median, c.max), (50, 70));
+        assert_eq!(c.prepare, [40, 45]);
+        assert_eq!(c.feedback, [20, 30]);
+        assert_eq!(c.max_at, (0, 1));
+    }
+
+    /// An odd number of dumps or a gap in their numbers is an error, not a silent mispairing.
+    #[test]
+    fn unpaired_dumps_are_an_error() {
+        assert!(split_phases(vec![(1, 10), (2, 20), (3, 5)], 1).is_err());
+        assert!(split_phases(vec![(1, 10), (3, 20)], 1).is_err());
+        assert!(split_phases(Vec::new(), 1).is_err());
+    }
 }

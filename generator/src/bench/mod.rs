@@ -8,10 +8,12 @@
 //! reference solver (interpreted model + clarabel) on the same scenario.
 
 mod dims;
+mod flops;
 mod generic;
 mod harness;
 
 pub use dims::{read as read_crate_dims, CrateDims};
+pub use flops::{step_work, StepWork};
 pub use generic::{run_generic, GenericTimings};
 pub use harness::{
     adversarial_outcome, build_harness, count_adversarial, count_instructions, run_harness, HarnessResult,
