@@ -91,6 +91,10 @@ struct BenchArgs {
     /// Scratch directory for the harness crate and its build.
     #[arg(long, default_value = "target/uavgen-bench")]
     work_dir: PathBuf,
+    /// Also build a Cortex-M7 firmware (thumbv7em-none-eabihf) holding the solver and report its flash
+    /// and RAM (needs `rustup target add thumbv7em-none-eabihf`).
+    #[arg(long)]
+    flash: bool,
     /// This machine's peak f64 rate in GFlop/s (lanes × FMA units × 2 × clock): with --model, the
     /// achieved rate of `prepare` is also given as a fraction of it.
     #[arg(long)]
@@ -603,12 +607,37 @@ fn bench(args: BenchArgs) -> Result<(), String> {
             }
             _ => None,
         };
+    let flash = if args.flash {
+        eprintln!("building the {FLASH_TARGET} firmware ...");
+        let dir = args
+            .crate_dir
+            .canonicalize()
+            .map_err(|e| format!("{}: {e}", args.crate_dir.display()))?;
+        let s = cli::progress::with_spinner("building the firmware", || measure_flash(&dir, &name, &options))?;
+        println!(
+            "  {FLASH_TARGET} firmware (cortex-m7, opt-level 3, LTO): flash {} bytes (.text {}, .rodata {}, .data {}, \
+             vector table {}), RAM {} bytes without the stack (.bss {}, .data {}, .uninit {})",
+            s.flash(),
+            s.text,
+            s.rodata,
+            s.data,
+            s.vector_table,
+            s.ram(),
+            s.bss,
+            s.data,
+            s.uninit
+        );
+        Some(s)
+    } else {
+        None
+    };
     let work_report = work.map(|w| print_work(&w, &timing, instructions.as_ref(), args.peak_gflops));
     if model.is_some() && work_report.is_none() {
         println!("  work per RTI step: counted from the emitted kernels of condensed crates only (this crate's QP is stage-wise)");
     }
     if let Some(path) = &args.json {
-        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "adversarial": adversarial, "generic": generic, "native": options.native, "work": work_report });
+        let value = serde_json::json!({ "generated": timing, "instructions": instructions, "adversarial": adversarial, "generic": generic, "native": options.native, "work": work_report,
+            "firmware": flash.as_ref().map(|s| serde_json::json!({ "target": FLASH_TARGET, "sections": s, "flash": s.flash(), "ram": s.ram() })) });
         let text = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())? + "\n";
         cli::write_atomically(path, &text)?;
     }

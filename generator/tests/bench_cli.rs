@@ -75,6 +75,14 @@ fn bench_counts_the_work_check_reports_and_splits_the_instructions() {
     if valgrind {
         args.extend_from_slice(&["--instructions", "2"]);
     }
+    // scripts/test.sh installs the Cortex-M target; a plain `cargo test` may not have it.
+    let thumb = Command::new("rustup")
+        .args(["target", "list", "--installed"])
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains("thumbv7em-none-eabihf"));
+    if thumb {
+        args.push("--flash");
+    }
     let o = uavgen(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     let report = json(&out);
@@ -109,6 +117,24 @@ fn bench_counts_the_work_check_reports_and_splits_the_instructions() {
         assert!(work["prepare_flops_per_instruction"].as_f64().unwrap() > 0.0);
     } else {
         eprintln!("valgrind not found: the instruction split is not checked");
+    }
+    if thumb {
+        // The solver is a static in .bss, none of it in flash-copied .data; its RAM is the
+        // solver's size (usize is 4 bytes on the Cortex-M, 8 here) plus the runtime's few bytes.
+        let fw = &report["firmware"];
+        let size_of = report["generated"]["size_of_mpc"].as_u64().unwrap();
+        let (ram, flash) = (fw["ram"].as_u64().unwrap(), fw["flash"].as_u64().unwrap());
+        assert_eq!(fw["sections"]["data"].as_u64(), Some(0), "{fw}");
+        assert!(
+            ram + 2048 >= size_of && ram <= size_of + 4096,
+            "RAM {ram} against size_of {size_of}"
+        );
+        assert!(
+            flash > 10_000 && fw["sections"]["text"].as_u64().unwrap() < flash,
+            "{fw}"
+        );
+    } else {
+        eprintln!("the thumbv7em-none-eabihf target is not installed: --flash is not checked");
     }
 }
 

@@ -8,11 +8,13 @@
 //! reference solver (interpreted model + clarabel) on the same scenario.
 
 mod dims;
+mod flash;
 mod flops;
 mod generic;
 mod harness;
 
 pub use dims::{read as read_crate_dims, CrateDims};
+pub use flash::{measure as measure_flash, FirmwareSizes, TARGET as FLASH_TARGET};
 pub use flops::{step_work, StepWork};
 pub use generic::{run_generic, GenericTimings};
 pub use harness::{
