@@ -11,6 +11,9 @@
 //!   significant digits.
 //!
 //! Needs `../shared/flights/m100` (CI has it); without it the test says SKIPPED and returns.
+//!
+//! And the m100_like check of the same protocol (a nominal-plant model diagnosed against flights of
+//! `plants/m100_like.json`, the delays and drag it must find), which needs no shared data.
 
 mod common;
 mod shared;
@@ -159,6 +162,81 @@ fn simulator_model_on_the_m100() {
         "the simulator's model must be worse than the aircraft's own (B {b}, R {r})"
     );
     assert!(closed >= 0.5, "(B − C)/(B − R) = {closed:.2}");
+}
+
+/// `plants/m100_like.json` (the nominal plant with the delays, drag, noise and stale rows measured
+/// on the M100) diagnosed with a base model identified on nominal-plant flights, as
+/// scripts/sim_to_real.sh: every channel's fitted delay (plus lag) within 20 % of the plant file's,
+/// and the drag named within 30 %. Needs no shared data.
+#[test]
+fn nominal_model_on_the_m100_like_plant() {
+    let dir = tempfile_dir("sim_to_real_m100_like");
+    let log = |plant: &str, duration: &str, seed: &str, name: &str| {
+        let path = dir.join(name);
+        ok(&[
+            "simulate",
+            "--plant",
+            plant,
+            "--profile",
+            "excite",
+            "--duration",
+            duration,
+            "--seed",
+            seed,
+            "--out",
+            s(&path),
+            "--force",
+        ]);
+        path
+    };
+    let nominal = log("plants/nominal.json", "180", "11", "nominal.csv");
+    let train = log("plants/m100_like.json", "180", "21", "train.csv");
+    let test = log("plants/m100_like.json", "90", "22", "test.csv");
+    let base = dir.join("base.json");
+    ok(&[
+        "identify",
+        "--method",
+        "sindy",
+        "--log",
+        s(&nominal),
+        "--out",
+        s(&base),
+        "--force",
+    ]);
+    let out = dir.join("diag");
+    ok(&[
+        "diagnose",
+        "--model",
+        s(&base),
+        "--log",
+        s(&train),
+        "--holdout",
+        s(&test),
+        "--out",
+        s(&out),
+        "--force",
+    ]);
+    let corrected = read(&out.join("corrected.json"));
+    let c = &corrected["corrections"];
+    let plant = read(&repo().join("plants/m100_like.json"));
+    let truth = plant["effects"]["latency"]["per_channel"].as_array().unwrap();
+    for (j, input) in ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"].iter().enumerate() {
+        let d = c["latency"][input].as_f64().unwrap_or(0.0) + c["actuator_lag"][input].as_f64().unwrap_or(0.0);
+        let t = truth[j].as_f64().unwrap();
+        eprintln!("{input}: delay + lag {d:.3} s against the plant's {t} s");
+        assert!(
+            (d / t - 1.0).abs() <= 0.2,
+            "{input}: {d:.3} s against {t} s; corrections {c}"
+        );
+    }
+    let drag = c["linear_drag"]["xy"].as_f64().unwrap_or(0.0);
+    for t in plant["effects"]["linear_drag"]["coefficients"].as_array().unwrap()[..2].iter() {
+        let t = t.as_f64().unwrap();
+        assert!(
+            (drag / t - 1.0).abs() <= 0.3,
+            "drag {drag} against {t}; corrections {c}"
+        );
+    }
 }
 
 fn tempfile_dir(name: &str) -> PathBuf {

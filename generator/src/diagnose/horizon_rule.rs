@@ -23,36 +23,42 @@ pub(crate) const STRIDE: usize = 3;
 
 /// The horizon errors of the model `state` describes, on the held-out data of every test fit.
 pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {
-    let horizon = p.options.horizon;
-    let segs = p.data.variant(state.destale);
     let mut out = HorizonErrors::default();
     for i in p.test_fits() {
-        let aug = p.augmented(state, i);
-        for &s in &p.fits[i].test {
-            let seg = &segs[s];
-            let seen = aug.seen_inputs(seg);
-            let ground: Vec<bool> = seg.x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
-            for k in (0..seg.len().saturating_sub(horizon)).step_by(STRIDE) {
-                if ground[k..=k + horizon].iter().any(|g| *g) {
-                    continue;
+        add_errors(p, state, i, &p.fits[i].test, STRIDE, &mut out);
+    }
+    out
+}
+
+/// Add to `out` the free runs of N samples of fit `i`'s model (`state` with that fit's parameters)
+/// from every `stride`-th sample of the segments `segs` (runs that touch the ground left out).
+pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], stride: usize, out: &mut HorizonErrors) {
+    let horizon = p.options.horizon;
+    let data = p.data.variant(state.destale);
+    let aug = p.augmented(state, i);
+    for &s in segs {
+        let seg = &data[s];
+        let seen = aug.seen_inputs(seg);
+        let ground: Vec<bool> = seg.x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
+        for k in (0..seg.len().saturating_sub(horizon)).step_by(stride.max(1)) {
+            if ground[k..=k + horizon].iter().any(|g| *g) {
+                continue;
+            }
+            out.runs += 1;
+            let pred = run(&aug, seg, &seen, k, horizon);
+            if pred.len() < horizon {
+                out.diverged += 1;
+            }
+            for (j, pr) in pred.iter().enumerate() {
+                let o = &seg.x[k + j + 1];
+                let pr = wrapped(pr, o);
+                for q in 0..12 {
+                    out.sse[q] += (pr[q] - o[q]).powi(2);
                 }
-                out.runs += 1;
-                let pred = run(&aug, seg, &seen, k, horizon);
-                if pred.len() < horizon {
-                    out.diverged += 1;
-                }
-                for (j, pr) in pred.iter().enumerate() {
-                    let o = &seg.x[k + j + 1];
-                    let pr = wrapped(pr, o);
-                    for q in 0..12 {
-                        out.sse[q] += (pr[q] - o[q]).powi(2);
-                    }
-                    out.n += 1;
-                }
+                out.n += 1;
             }
         }
     }
-    out
 }
 
 #[cfg(test)]

@@ -8,6 +8,7 @@ use super::catalogue::inputs::{delay_grid, InputTransform, LAG_CHANNELS};
 use super::catalogue::EffectKind;
 use super::design::design;
 use super::fit::{profile_sigma, MAX_LAG};
+use super::horizon_fit::Bracket;
 use super::horizon_rule::horizon_errors;
 use super::problem::{Current, HorizonErrors, Problem, State};
 use super::score::{lr_z, sums_masked, taus, Rules, Sums};
@@ -41,8 +42,41 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, kind: EffectKi
             (!aff.is_empty()).then(|| scan_channel(p, state, cur, kind, j, aff, rules))
         })
         .collect();
+    if kind == EffectKind::Latency {
+        refine_over_the_horizon(p, state, &mut scans);
+    }
     let (used, after_horizon) = keep_channels(p, state, cur, kind, &mut scans);
     score(p, state, cur, kind, rules, scans, used, after_horizon)
+}
+
+/// The kept channels' delays refined on the training free runs, between the one-step optimum and
+/// the residual cross-correlation's delay ([`super::horizon_fit`]); each fit's own scanned value
+/// moves by the same amount (cross-validation folds).
+fn refine_over_the_horizon(p: &Problem, state: &State, scans: &mut [ChannelScan]) {
+    let mut kept: Vec<usize> = (0..scans.len()).filter(|&q| scans[q].param.kept).collect();
+    kept.sort_by(|&a, &b| scans[b].param.z.total_cmp(&scans[a].param.z));
+    let channels: Vec<Bracket> = kept
+        .iter()
+        .map(|&q| {
+            let j = scans[q].param.input;
+            Bracket::between(j, scans[q].param.value, p.seeds[j])
+        })
+        .collect();
+    let refined = super::horizon_fit::refine_delays(p, state, &channels);
+    let max = p.options.max_delay_samples * p.dt();
+    for (&q, v) in kept.iter().zip(refined) {
+        let scan = &mut scans[q];
+        let shift = v - scan.param.value;
+        if shift.abs() < 1e-12 {
+            continue;
+        }
+        scan.param.one_step = Some(scan.param.value);
+        scan.param.seed = p.seeds[scan.param.input];
+        scan.param.value = v;
+        for c in scan.chosen.iter_mut() {
+            *c = (*c + shift).clamp(0.0, max);
+        }
+    }
 }
 
 /// The dynamic rows channel j acts on (input j's rows, or the lag channel's own row); with a
@@ -141,6 +175,8 @@ fn scan_channel(
         param: InputParam {
             input: j,
             value,
+            one_step: None,
+            seed: None,
             sigma,
             z,
             kept: z > rules.min_z && value > 0.0,

@@ -30,6 +30,7 @@ mod data;
 mod design;
 mod envelope;
 pub mod fit;
+mod horizon_fit;
 mod horizon_rule;
 mod inherited;
 mod input_fit;

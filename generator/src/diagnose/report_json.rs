@@ -16,6 +16,12 @@ pub struct InputScan {
     pub input: String,
     /// Delay or time constant fitted on the training data, s.
     pub value: f64,
+    /// A delay refined over the horizon: the one-step optimum (to which `sigma` and `z` belong)
+    /// and the residual cross-correlation's delay, between which it was chosen.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub one_step: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cross_correlation: Option<f64>,
     pub sigma: Option<f64>,
     /// Likelihood-ratio z of this channel alone.
     pub z: f64,
@@ -302,6 +308,8 @@ pub fn effect_report(c: &Candidate, round: usize, selected: bool, rotor_radius: 
                     .map(|s| InputScan {
                         input: lag_channel_name(s.input),
                         value: s.value,
+                        one_step: s.one_step,
+                        cross_correlation: s.one_step.and(s.seed),
                         sigma: s.sigma,
                         z: s.z,
                         kept: s.kept,

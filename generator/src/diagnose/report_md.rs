@@ -212,7 +212,41 @@ fn which_section(s: &mut String, d: &Diagnosis) {
             let _ = writeln!(s, "{line}");
         }
     }
+    refined_section(s, d);
     let _ = writeln!(s);
+}
+
+/// The named delays that the horizon moved away from their one-step optimum, with both estimates.
+fn refined_section(s: &mut String, d: &Diagnosis) {
+    let refined: Vec<String> = d
+        .effects
+        .iter()
+        .filter(|e| e.selected)
+        .flat_map(|e| {
+            e.scan.iter().flatten().filter(|c| c.kept).filter_map(move |c| {
+                let one = c.one_step?;
+                let sigma = c.sigma.map(|v| format!(" ± {v:.3}")).unwrap_or_default();
+                let xc = c
+                    .cross_correlation
+                    .map(|v| format!(", the residual cross-correlation {v:.3} s"))
+                    .unwrap_or_default();
+                Some(format!(
+                    "- {} {}: {:.3} s, chosen over the horizon between the one-step optimum {one:.3}{sigma} s{xc}",
+                    e.name, c.input, c.value
+                ))
+            })
+        })
+        .collect();
+    if !refined.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nDelays refined over the horizon (the free runs of the training data decide between the one-step fit \
+             and the residual analysis; docs/diagnose.md):\n"
+        );
+        for line in refined {
+            let _ = writeln!(s, "{line}");
+        }
+    }
 }
 
 /// "How the command channels answer": step responses, corrected against base.

@@ -18,6 +18,11 @@ pub(crate) struct InputParam {
     pub input: usize,
     /// Delay or time constant, s (fit on all training data).
     pub value: f64,
+    /// A delay refined over the horizon ([`super::horizon_fit`]): the one-step scan's optimum, to
+    /// which `sigma` and `z` belong, and the residual cross-correlation's delay, the other end of
+    /// the bracket it was refined in.
+    pub one_step: Option<f64>,
+    pub seed: Option<f64>,
     pub sigma: Option<f64>,
     /// Likelihood-ratio z of this channel alone.
     pub z: f64,

@@ -51,7 +51,8 @@ fn named_inputs(state: &State) -> Vec<(EffectKind, usize)> {
 
 /// Backfitting after a new effect is named: each named delay or lag is scanned again with the
 /// named linear effects refitted at every grid value (their profile), on all training data, then
-/// the linear parameters are refitted per fit; twice. Without it an effect named first absorbs
+/// the linear parameters are refitted per fit, and the delays refined over the horizon
+/// ([`super::horizon_fit`]); twice. Without it an effect named first absorbs
 /// part of one named later (a drag fitted before a delay of u_vz was known keeps a biased z
 /// coefficient, and the remainder looks like a third effect).
 fn backfit(p: &Problem, state: &mut State) {
@@ -119,6 +120,15 @@ fn backfit(p: &Problem, state: &mut State) {
                 EffectKind::Latency => state.transform.delay[j] = best.1,
                 _ => state.transform.set_lag(j, Some(best.1)),
             }
+        }
+        // The delays, rescanned one step ahead, refined over the horizon as when they were named.
+        let delays: Vec<super::horizon_fit::Bracket> = inputs
+            .iter()
+            .filter(|(k, _)| *k == EffectKind::Latency)
+            .map(|&(_, j)| super::horizon_fit::Bracket::between(j, state.transform.delay[j], p.seeds[j]))
+            .collect();
+        for (c, v) in delays.iter().zip(super::horizon_fit::refine_delays(p, state, &delays)) {
+            state.transform.delay[c.input] = v;
         }
         super::loop_fit::refit(p, state);
         refit(p, state);

@@ -86,7 +86,9 @@ pub(crate) fn wrapped(p: &[f64; 12], o: &[f64; 12]) -> [f64; 12] {
 }
 
 /// The base model and the model `state` describes, pooled over the test segments s of every test
-/// fit, with that fit's parameters; `seg(s, destaled)` gives the data of segment s, raw or with
+/// fit, with that fit's parameters, their input delays rounded to whole samples of each segment as
+/// `uavgen evaluate` runs the model files (so that it reproduces these figures; the fitted delays
+/// themselves keep their fraction of a sample); `seg(s, destaled)` gives the data of segment s, raw or with
 /// stale rows interpolated (None: left out). The model with the effects runs on the data under the
 /// stale policy (`state.destale`); the base model on the same data (`before_raw` false: the figures
 /// `uavgen evaluate` reproduces), or on the raw data (`before_raw` true: the self-check's gap,
@@ -104,12 +106,22 @@ pub(crate) fn pools<'d>(
         for &s in &p.fits[i].test {
             let base_variant = state.destale && !before_raw;
             if let (Some(raw), Some(variant)) = (seg(s, base_variant), seg(s, state.destale)) {
-                before.add(&plain, raw, p.options.horizon);
-                after.add(&aug, variant, p.options.horizon);
+                before.add(&whole_samples(&plain, raw.dt), raw, p.options.horizon);
+                after.add(&whole_samples(&aug, variant.dt), variant, p.options.horizon);
             }
         }
     }
     (before, after)
+}
+
+/// `a` with its delays rounded to whole samples of `dt` (`InputTransform::whole_samples`).
+fn whole_samples<'a>(a: &Augmented<'a>, dt: f64) -> Augmented<'a> {
+    Augmented {
+        base: a.base,
+        ctx: a.ctx,
+        linear: a.linear.clone(),
+        transform: a.transform.whole_samples(dt),
+    }
 }
 
 impl Pool {

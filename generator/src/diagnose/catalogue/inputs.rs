@@ -66,6 +66,18 @@ impl InputTransform {
         self.base_delay[j] + self.delay[j]
     }
 
+    /// The delays as the corrected model file is run by `uavgen evaluate`, `track` and the
+    /// generated crate: each channel's total rounded to whole samples of `dt`
+    /// (`ir::delay_samples`), the fitted part adjusted to make up the difference.
+    pub fn whole_samples(&self, dt: f64) -> Self {
+        let mut t = *self;
+        let totals: Vec<f64> = (0..4).map(|j| self.total_delay(j)).collect();
+        for (j, n) in crate::ir::delay_samples(&totals, dt).into_iter().enumerate() {
+            t.delay[j] = n as f64 * dt - self.base_delay[j];
+        }
+        t
+    }
+
     /// The gain of input channel j (1 without one).
     pub fn gain_of(&self, j: usize) -> f64 {
         self.gain[j].unwrap_or(1.0)
