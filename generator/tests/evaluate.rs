@@ -10,6 +10,10 @@ use uavgen::metrics::Metrics;
 use uavgen::model::parse;
 use uavgen::{load, Model, ModelIr};
 
+/// The height (m) of the synthetic flights: well clear of the ground, whose samples (z ≤ 0.02 m)
+/// evaluate's horizon runs leave out.
+const FLYING: f64 = 10.0;
+
 const HEADER: &str = "t,x,y,z,roll,pitch,yaw,vx,vy,vz,roll_rate,pitch_rate,yaw_rate,u_vz,u_roll,u_pitch,u_yaw_rate";
 
 /// A log in the LOG_FORMAT.md CSV format from time stamps (as written), states and inputs.
@@ -81,6 +85,7 @@ fn simulated_pd_log(model: &Model, substeps: usize, n: usize) -> FlightLog {
     let mut xs = Vec::new();
     let mut us = Vec::new();
     let mut x = vec![0.0; 12];
+    x[2] = FLYING;
     for k in 0..n {
         let tk = k as f64 * dt;
         let u = [
@@ -138,6 +143,7 @@ fn constant_velocity_model_on_constant_acceleration_log_gives_the_hand_computed_
             let tk = k as f64 * dt;
             let mut s = [0.0; 12];
             s[0] = 0.5 * a * tk * tk;
+            s[2] = FLYING; // airborne: evaluate leaves out horizon runs on the ground
             s[6] = a * tk;
             s
         })
@@ -216,6 +222,7 @@ fn divergence_stops_the_run_and_keeps_finite_metrics() {
         .map(|k| {
             let mut s = [0.0; 12];
             s[0] = k as f64 * dt;
+            s[2] = FLYING;
             s[6] = 1.0;
             s
         })
@@ -263,6 +270,7 @@ fn yaw_errors_are_wrapped() {
     let x: Vec<[f64; 12]> = (0..n)
         .map(|_| {
             let mut s = [0.0; 12];
+            s[2] = FLYING;
             s[11] = rate;
             s
         })
@@ -281,6 +289,46 @@ fn yaw_errors_are_wrapped() {
     assert!(w.rmse[5] < 1e-6, "yaw RMSE {}", w.rmse[5]);
     // Unwrapped, the error would grow to 2π (n − 1) ≈ 182 rad.
     assert!(w.mae[5] < 1e-6, "yaw MAE {}", w.mae[5]);
+}
+
+/// Horizon runs that touch the ground (z ≤ 0.02 m) are left out and counted, as diagnose does; a
+/// log on the ground throughout is an error naming it.
+#[test]
+fn horizon_runs_on_the_ground_are_left_out() {
+    let (dt, n, h) = (0.1, 40usize, 5usize);
+    let t: Vec<String> = (0..n).map(|k| format!("{:.1}", k as f64 * dt)).collect();
+    // On the ground for samples 0..10 (z = 0, then 0.02: still ground), then 1 m up.
+    let x: Vec<[f64; 12]> = (0..n)
+        .map(|k| {
+            let mut s = [0.0; 12];
+            s[2] = match k {
+                0..=9 => 0.0,
+                10 => 0.02,
+                _ => 1.0,
+            };
+            s
+        })
+        .collect();
+    let model = sindy("still", &["1"], &[]);
+    let options = EvaluateOptions {
+        horizon: h,
+        substeps: Some(1),
+        ..Default::default()
+    };
+    let e = evaluate(&model, &[log_from(&t, &x, &vec![[0.0; 4]; n], "takeoff.csv")], &options).unwrap();
+    // Runs start at k = 0..n−h−1 and cover k..k+h: those with k ≤ 10 touch the ground.
+    assert_eq!(e.horizon.on_ground, 11);
+    assert_eq!(e.horizon.runs, n - h - 11);
+    assert_eq!(e.horizon.metrics.as_ref().unwrap().samples, (n - h - 11) * h);
+    let grounded = vec![[0.0; 12]; n];
+    let err = evaluate(
+        &model,
+        &[log_from(&t, &grounded, &vec![[0.0; 4]; n], "parked.csv")],
+        &options,
+    )
+    .unwrap_err();
+    let text = err.to_string();
+    assert!(text.contains("parked.csv") && text.contains("ground"), "{text}");
 }
 
 #[test]

@@ -229,6 +229,15 @@ fn nominal_model_on_the_m100_like_plant() {
             "{input}: {d:.3} s against {t} s; corrections {c}"
         );
     }
+    // The report's before/after horizon figures are what `uavgen evaluate` gives for the files
+    // (delays in whole samples, runs on the ground left out by both).
+    let report = read(&out.join("report.json"));
+    let b = report["shrink"]["before"]["horizon"]["overall_rmse"].as_f64().unwrap();
+    let a = report["shrink"]["after"]["horizon"]["overall_rmse"].as_f64().unwrap();
+    let b_eval = horizon_rmse(&base, &test, &dir.join("eval_base.json"));
+    let a_eval = horizon_rmse(&out.join("corrected.json"), &test, &dir.join("eval_corrected.json"));
+    assert!(same4(b, b_eval), "before: report {b}, evaluate {b_eval}");
+    assert!(same4(a, a_eval), "after: report {a}, evaluate {a_eval}");
     let drag = c["linear_drag"]["xy"].as_f64().unwrap_or(0.0);
     for t in plant["effects"]["linear_drag"]["coefficients"].as_array().unwrap()[..2].iter() {
         let t = t.as_f64().unwrap();

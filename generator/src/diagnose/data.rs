@@ -61,10 +61,7 @@ impl SegData {
     }
 }
 
-/// A row with z at or below this (m) is taken as on the ground (LOG_FORMAT.md's z is the height,
-/// ground at 0): ground contact forces are not flight dynamics, and simulated logs of a heavy
-/// vehicle rest there.
-pub const GROUND_CLEARANCE: f64 = 0.02;
+pub use crate::logs::GROUND_CLEARANCE;
 
 /// The raw data and, if any row is stale, the copy with stale rows interpolated.
 pub(crate) struct Prepared {

@@ -24,7 +24,7 @@ pub use plot::{plot_states, write_svg, PlotKind};
 use crate::discretize::{auto_substeps, discrete_step, Envelope, SubstepError};
 use crate::identify::dataset::{build, DatasetError, DatasetOptions};
 use crate::ir::ModelIr;
-use crate::logs::{median, FlightLog, Segment, StalePolicy, YAW};
+use crate::logs::{median, FlightLog, Segment, StalePolicy, GROUND_CLEARANCE, YAW};
 use crate::metrics::{compare, Metrics, MetricsError};
 use crate::model::Model;
 use inputs::{logged, ModelInputs};
@@ -100,6 +100,8 @@ pub enum EvaluateError {
         horizon: usize,
         longest: usize,
     },
+    #[error("{files}: every horizon run of {horizon} samples touches the ground (z ≤ 0.02 m, {runs} runs left out): there is no flight to score")]
+    AllOnGround { files: String, horizon: usize, runs: usize },
     #[error("{path}: cannot write the plot: {message}")]
     Plot { path: String, message: String },
 }
@@ -120,10 +122,14 @@ pub struct OneStep {
 pub struct Horizon {
     /// Samples per run.
     pub horizon: usize,
-    /// Runs started (one per sample that has `horizon` samples after it in its segment).
+    /// Runs scored (one per sample that has `horizon` samples after it in its segment, unless a
+    /// sample of the run is on the ground: `on_ground`).
     pub runs: usize,
     /// Runs that diverged before their end.
     pub diverged: usize,
+    /// Runs left out because a sample of theirs is on the ground (z ≤ `logs::GROUND_CLEARANCE`),
+    /// as `diagnose` leaves them out.
+    pub on_ground: usize,
     /// All finite predictions of all runs (steps 1..=horizon) pooled.
     pub metrics: Option<Metrics>,
     /// The predictions at step `horizon` of the runs that reached it.
@@ -296,6 +302,7 @@ struct Acc {
     steps: StepErrors,
     horizon_runs: usize,
     horizon_diverged: usize,
+    horizon_on_ground: usize,
     whole: Pool,
     whole_runs: usize,
     whole_diverged: usize,
@@ -313,6 +320,7 @@ impl Acc {
             steps: StepErrors::new(h),
             horizon_runs: 0,
             horizon_diverged: 0,
+            horizon_on_ground: 0,
             whole: Pool::default(),
             whole_runs: 0,
             whole_diverged: 0,
@@ -329,6 +337,7 @@ impl Acc {
         self.steps.merge(&o.steps);
         self.horizon_runs += o.horizon_runs;
         self.horizon_diverged += o.horizon_diverged;
+        self.horizon_on_ground += o.horizon_on_ground;
         self.whole.extend(&o.whole);
         self.whole_runs += o.whole_runs;
         self.whole_diverged += o.whole_diverged;
@@ -351,6 +360,7 @@ impl Acc {
             horizon: h,
             runs: self.horizon_runs,
             diverged: self.horizon_diverged,
+            on_ground: self.horizon_on_ground,
             metrics: self.horizon.metrics(names)?,
             end: self.horizon_end.metrics(names)?,
             rmse_by_step: self.steps.rmse(),
@@ -540,9 +550,15 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
                     acc.next.push(&p[..NX], &seg.x[k + 1], Some(YAW));
                 }
             }
-            // 2. Horizon free runs from every sample with a full horizon after it.
+            // 2. Horizon free runs from every sample with a full horizon after it, clear of the
+            //    ground (diagnose's rule).
+            let ground: Vec<bool> = seg.x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
             let (mut runs, mut diverged, mut first_diverged) = (0, 0, None);
             for k in 0..n.saturating_sub(h) {
+                if ground[k..=k + h].iter().any(|g| *g) {
+                    acc.horizon_on_ground += 1;
+                    continue;
+                }
                 runs += 1;
                 let pred = horizon_run(&st, seg, &inputs, k, h, dt, m);
                 for (j, p) in pred.iter().enumerate() {
@@ -597,6 +613,13 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
     let files = || logs.iter().map(|l| l.source.as_str()).collect::<Vec<_>>().join(", ");
     if total.next_made == 0 {
         return Err(EvaluateError::TooShort { files: files() });
+    }
+    if total.horizon_runs == 0 && total.horizon_on_ground > 0 {
+        return Err(EvaluateError::AllOnGround {
+            files: files(),
+            horizon: h,
+            runs: total.horizon_on_ground,
+        });
     }
     if total.horizon_runs == 0 {
         let longest = logs

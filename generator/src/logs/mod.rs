@@ -28,6 +28,12 @@ pub use crate::model::{DEFAULT_INPUTS as INPUT_COLUMNS, DEFAULT_STATES as STATE_
 /// Index of yaw in the state vector.
 pub const YAW: usize = 5;
 
+/// A row with z at or below this (m) is taken as on the ground (LOG_FORMAT.md's z is the height,
+/// ground at 0): ground contact forces are not flight dynamics, and simulated logs of a heavy
+/// vehicle rest there. `diagnose` leaves such samples out of every fit and score, and `evaluate` and
+/// `diagnose` leave out the horizon free runs that touch them, alike.
+pub const GROUND_CLEARANCE: f64 = 0.02;
+
 /// A validated flight log.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FlightLog {
