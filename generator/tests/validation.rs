@@ -214,8 +214,11 @@ fn log_file(dir: &Path, name: &str, rows: usize, f: impl Fn(usize, usize) -> f64
     path
 }
 
+/// A small wave on every column, z lifted to 5 m: a flight (evaluate leaves out horizon runs on
+/// the ground, z ≤ 0.02 m).
 fn wavy(k: usize, c: usize) -> f64 {
-    0.1 * ((k as f64) * 0.05 * (c + 1) as f64).sin()
+    let lift = if c == 2 { 5.0 } else { 0.0 };
+    lift + 0.1 * ((k as f64) * 0.05 * (c + 1) as f64).sin()
 }
 
 #[test]
