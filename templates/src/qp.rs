@@ -48,8 +48,9 @@ pub struct QpResult {
 /// Workspace of the active-set solver for `NV` variables (no allocation).
 #[derive(Clone, Debug)]
 pub struct BoxQp<const NV: usize> {
-    /// Cholesky factor of H_FF, lower triangle, `nf × nf` used.
-    l: [[Real; NV]; NV],
+    /// Cholesky factor of H_FF, stored transposed: `u[j][i]` = L_ij for j ≤ i (row j of `u` is
+    /// column j of L, so the substitutions and updates run over contiguous slices), `nf × nf` used.
+    u: [[Real; NV]; NV],
     /// Free variables in factor order.
     free: [usize; NV],
     nf: usize,
@@ -96,29 +97,120 @@ pub fn dot(a: &[Real], b: &[Real]) -> Real {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
-/// Four dot products of `a` with `b[0..4]` (all over a's length), sharing the
-/// loads of `a`; 4 lanes per product so the loop vectorises.
+/// w_k ← (((w_k − x₀ r₀_k) − x₁ r₁_k) − x₂ r₂_k) − x₃ r₃_k for every k (over the shortest
+/// length): four columns of a substitution at once, one load and store of w per four
+/// multiply-adds. Elementwise, two elements per iteration, so that it vectorises on x86-64 (SSE2)
+/// without reassociating anything.
 #[inline]
-fn dot4(a: &[Real], b: [&[Real]; 4]) -> [Real; 4] {
-    let mut acc = [[0.0 as Real; 4]; 4];
-    let mut out = [0.0 as Real; 4];
-    let chunks_a = a.chunks_exact(4);
-    let tail_a = chunks_a.remainder();
-    for (c, bc) in b.iter().enumerate() {
-        let chunks_b = bc.chunks_exact(4);
-        let tail_b = chunks_b.remainder();
-        for (x, y) in a.chunks_exact(4).zip(chunks_b) {
-            for l in 0..4 {
-                acc[c][l] += x[l] * y[l];
-            }
+fn axpy4(w: &mut [Real], x: [Real; 4], r: [&[Real]; 4]) {
+    let n = w.len().min(r[0].len()).min(r[1].len()).min(r[2].len()).min(r[3].len());
+    let (w, r0, r1, r2, r3) = (&mut w[..n], &r[0][..n], &r[1][..n], &r[2][..n], &r[3][..n]);
+    let rows = r0
+        .chunks_exact(2)
+        .zip(r1.chunks_exact(2))
+        .zip(r2.chunks_exact(2))
+        .zip(r3.chunks_exact(2));
+    for (wk, (((a, b), c), d)) in w.chunks_exact_mut(2).zip(rows) {
+        for l in 0..2 {
+            wk[l] = (((wk[l] - x[0] * a[l]) - x[1] * b[l]) - x[2] * c[l]) - x[3] * d[l];
         }
-        let mut t = (acc[c][0] + acc[c][2]) + (acc[c][1] + acc[c][3]);
-        for (x, y) in tail_a.iter().zip(tail_b) {
-            t += x * y;
-        }
-        out[c] = t;
     }
-    out
+    if n % 2 == 1 {
+        let k = n - 1;
+        w[k] = (((w[k] - x[0] * r0[k]) - x[1] * r1[k]) - x[2] * r2[k]) - x[3] * r3[k];
+    }
+}
+
+/// w_k ← w_k − x₀ r₀_k − … − x₇ r₇_k (subtracted in that order) for every k: eight columns
+/// of a substitution at once (one load and store of w per eight multiply-adds). Elementwise, so
+/// the loop vectorises without reassociating anything.
+#[inline]
+fn axpy8(w: &mut [Real], x: &[Real; 8], r: [&[Real]; 8]) {
+    let mut n = w.len();
+    for row in r {
+        n = n.min(row.len());
+    }
+    let w = &mut w[..n];
+    let [r0, r1, r2, r3, r4, r5, r6, r7] = r;
+    let (r0, r1, r2, r3, r4, r5, r6, r7) = (
+        &r0[..n],
+        &r1[..n],
+        &r2[..n],
+        &r3[..n],
+        &r4[..n],
+        &r5[..n],
+        &r6[..n],
+        &r7[..n],
+    );
+    for k in 0..n {
+        let a = ((w[k] - x[0] * r0[k]) - x[1] * r1[k]) - x[2] * r2[k];
+        let b = ((a - x[3] * r3[k]) - x[4] * r4[k]) - x[5] * r5[k];
+        w[k] = (b - x[6] * r6[k]) - x[7] * r7[k];
+    }
+}
+
+/// w_k −= x r_k for every k (over the shorter length).
+#[inline]
+fn axpy(w: &mut [Real], x: Real, r: &[Real]) {
+    for (wk, rk) in w.iter_mut().zip(r) {
+        *wk -= x * rk;
+    }
+}
+
+/// Forward substitution with L by columns (column j of L is row j of `u`): for j in
+/// `start..stop`, w_j ← w_j / L_jj, then w_k −= w_j L_kj for k in j + 1..`end` (end ≥ stop;
+/// the rows of L from `stop` on only receive the updates). Four columns at a time.
+fn forward<const NV: usize>(u: &[[Real; NV]; NV], w: &mut [Real; NV], start: usize, stop: usize, end: usize) {
+    let end = end.min(NV);
+    let stop = stop.min(end);
+    let mut j = start;
+    while j + 8 <= stop {
+        let Some(rows) = u.get(j..j + 8) else {
+            break;
+        };
+        // The 8 × 8 triangle (j + 7 < stop ≤ NV).
+        let mut x = [0.0 as Real; 8];
+        for c in 0..8 {
+            let jc = (j + c).min(NV - 1);
+            let mut s = w[jc];
+            for (xc2, row) in x.iter().zip(rows).take(c) {
+                s -= xc2 * row[jc];
+            }
+            let pivot = rows.get(c).map_or(1.0, |row| row[jc]);
+            x[c] = s / pivot;
+            w[jc] = x[c];
+        }
+        let lo = (j + 8).min(end);
+        let r = core::array::from_fn(|c| rows.get(c).map_or(&[][..], |row| &row[lo..end]));
+        axpy8(&mut w[lo..end], &x, r);
+        j += 8;
+    }
+    while j + 4 <= stop {
+        let (Some([r0, r1, r2, r3]), Some(wj)) = (u.get(j..j + 4), w.get_mut(j..j + 4)) else {
+            break;
+        };
+        // The 4 × 4 triangle (j + 3 < stop ≤ NV).
+        let x0 = wj[0] / r0[j];
+        let x1 = (wj[1] - x0 * r0[j + 1]) / r1[j + 1];
+        let x2 = ((wj[2] - x0 * r0[j + 2]) - x1 * r1[j + 2]) / r2[j + 2];
+        let x3 = (((wj[3] - x0 * r0[j + 3]) - x1 * r1[j + 3]) - x2 * r2[j + 3]) / r3[j + 3];
+        wj.copy_from_slice(&[x0, x1, x2, x3]);
+        let lo = j + 4;
+        axpy4(
+            &mut w[lo..end],
+            [x0, x1, x2, x3],
+            [&r0[lo..end], &r1[lo..end], &r2[lo..end], &r3[lo..end]],
+        );
+        j += 4;
+    }
+    while j < stop {
+        let r = &u[j % NV];
+        let x = w[j % NV] / r[j % NV];
+        w[j % NV] = x;
+        let lo = (j + 1).min(end);
+        axpy(&mut w[lo..end], x, &r[lo..end]);
+        j += 1;
+    }
 }
 
 /// Violated bounds that trigger a projection restart.
@@ -170,7 +262,7 @@ impl<const NV: usize> BoxQp<NV> {
             i += 1;
         }
         Self {
-            l: [[0.0; NV]; NV],
+            u: [[0.0; NV]; NV],
             free: [0; NV],
             nf: 0,
             state: [Bound::Free; NV],
@@ -278,6 +370,12 @@ impl<const NV: usize> BoxQp<NV> {
     }
 
     /// Rows `from..nf` of the Cholesky factor of H_FF, rows before `from` given.
+    ///
+    /// Row i of L is the forward substitution L₁₁ x = H_{F(..i), F(i)} in column form (column j
+    /// of L is row j of `u`, contiguous): w ← H's column of i; for each j, x_j = w_j / L_jj and
+    /// w_k −= x_j L_kj for k > j, four columns j at a time. The updates of w are elementwise
+    /// multiply-subtracts over contiguous slices, which vectorise on x86-64 and need no
+    /// reassociation (the order of the terms of each w_k is fixed).
     fn factor_rows(&mut self, h: &[[Real; NV]; NV], from: usize) -> Result<(), QpStatus> {
         let nf = self.nf.min(NV);
         let free = self.free;
@@ -292,6 +390,7 @@ impl<const NV: usize> BoxQp<NV> {
                 first[usize::from(group[var(i)]) % NV] = i;
             }
         }
+        let w = &mut self.work;
         for i in from..nf {
             // i < nf ≤ NV; said again so that no bounds check (panic path) is left below.
             if i >= NV {
@@ -300,118 +399,63 @@ impl<const NV: usize> BoxQp<NV> {
             let hi = &h[var(i)];
             let gi = group[var(i)];
             let start = first[usize::from(gi) % NV].min(i);
-            for x in self.l[i][..start].iter_mut() {
-                *x = 0.0;
+            // w = H's column of variable i over positions start..i; row i of L = L₁₁⁻¹ w.
+            for (wk, &v) in w[start..i].iter_mut().zip(&free[start..i]) {
+                *wk = hi[v.min(NV - 1)];
             }
-            // Four entries of row i at a time share the loads of L[i][start..j].
-            let mut j = start;
-            while j + 4 <= i {
-                let (head, tail) = self.l.split_at_mut(i);
-                let (Some(li), Some(rows)) = (tail.first_mut(), head.get(j..j + 4)) else {
-                    break;
-                };
-                let n = j.min(NV);
-                let m = start.min(n);
-                let d = dot4(
-                    &li[m..n],
-                    [&rows[0][m..n], &rows[1][m..n], &rows[2][m..n], &rows[3][m..n]],
-                );
-                for c in 0..4 {
-                    let lj = &rows[c];
-                    let mut s = hi[var(j + c)] - d[c];
-                    for k in j..j + c {
-                        if let (Some(a), Some(b)) = (li.get(k), lj.get(k)) {
-                            s -= a * b;
-                        }
-                    }
-                    // j + c < i < NV: `get` keeps the bounds check (and its panic path) out.
-                    let pivot = lj.get(j + c).copied().unwrap_or(1.0);
-                    if let Some(x) = li.get_mut(j + c) {
-                        *x = s / pivot;
-                    }
-                }
-                j += 4;
+            forward(&self.u, w, start, i, i);
+            let s = hi[var(i)] - dot(&w[start..i], &w[start..i]);
+            if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
+                return Err(QpStatus::NotPositiveDefinite);
             }
-            for j in j..=i {
-                if grouped && group[var(j)] != gi {
-                    // Another component: exactly zero.
-                    self.l[i][j] = 0.0;
-                    continue;
-                }
-                let m = start.min(j);
-                let s = hi[var(j)] - dot(&self.l[i][m..j], &self.l[j][m..j]);
-                if j < i {
-                    self.l[i][j] = s / self.l[j][j];
-                } else {
-                    if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
-                        return Err(QpStatus::NotPositiveDefinite);
-                    }
-                    self.l[i][i] = sqrt(s);
-                }
+            // Column i of U (row i of L): exactly zero before `start`.
+            for (row, &x) in self.u.iter_mut().zip(&w[..i]).skip(start) {
+                row[i] = x;
             }
+            for row in self.u[..start].iter_mut() {
+                row[i] = 0.0;
+            }
+            self.u[i][i] = sqrt(s);
         }
         Ok(())
     }
 
-    /// For each free position i, the first position of its component: L[i][..start[i]] is
-    /// exactly zero (`with_groups`), so the substitutions skip it.
-    /// `None` for a single component (every start is 0).
-    fn row_starts(&self) -> Option<[usize; NV]> {
-        let nf = self.free_count();
-        if self.groups <= 1 {
-            return None;
-        }
-        let mut first = [nf; NV];
-        for i in (0..nf).rev() {
-            first[usize::from(self.group[self.var(i)]) % NV] = i;
-        }
-        let mut start = [0; NV];
-        for i in 0..nf {
-            start[i] = first[usize::from(self.group[self.var(i)]) % NV].min(i);
-        }
-        Some(start)
-    }
-
-    /// Solve L Lᵀ y = b in place on `rhs[..nf]` (forward then backward substitution).
+    /// Solve L Lᵀ y = b in place on `rhs[..nf]`: forward substitution by columns (four at a
+    /// time, as in [`Self::factor_rows`]), backward by rows of Lᵀ (dot products).
     fn solve_factored(&mut self) {
         let nf = self.free_count();
-        let start = self.row_starts();
+        let y = &mut self.rhs;
         // L y = b
-        for i in 0..nf {
-            let row = &self.l[i];
-            let s = start.as_ref().map_or(0, |st| st[i]).min(i);
-            self.rhs[i] = (self.rhs[i] - dot(&row[s..i], &self.rhs[s..i])) / row[i];
-        }
-        // Lᵀ x = y, by columns of Lᵀ = rows of L
+        forward(&self.u, y, 0, nf, nf);
+        // Lᵀ x = y: x_i = (y_i − Σ_{k>i} L_ki x_k) / L_ii, L_ki = u[i][k].
         for i in (0..nf).rev() {
-            let xi = self.rhs[i] / self.l[i][i];
-            self.rhs[i] = xi;
-            let row = &self.l[i];
-            for k in start.as_ref().map_or(0, |st| st[i])..i {
-                self.rhs[k] -= row[k] * xi;
-            }
+            let row = &self.u[i];
+            let s = dot(&row[i + 1..nf], &y[i + 1..nf]);
+            y[i] = (y[i] - s) / row[i];
         }
     }
 
     /// Remove free position `p` from the factor. With L = [L11 0 0; l21ᵀ l22 0; L31 l32 L33],
     /// the factor of H_FF without p is [L11 0; L31 L33'] with L33' L33'ᵀ = L33 L33ᵀ + l32 l32ᵀ
-    /// (a rank-one update by rotations).
+    /// (a rank-one update by rotations, applied along the rows of U = Lᵀ).
     fn remove(&mut self, p: usize) {
         let nf = self.free_count();
         if p >= nf {
             return;
         }
-        // x = l32 (column p below the diagonal), rows shifted up over row p.
-        for i in p + 1..nf {
-            self.target[i - 1] = self.l[i][p];
-            for k in 0..p {
-                self.l[i - 1][k] = self.l[i][k];
-            }
-            for k in p + 1..NV {
-                if k > i {
-                    break;
-                }
-                self.l[i - 1][k - 1] = self.l[i][k];
+        // x = l32 (column p of L below the diagonal = row p of U).
+        for (t, &x) in self.target[p..nf - 1].iter_mut().zip(&self.u[p][p + 1..nf]) {
+            *t = x;
+        }
+        // Delete column p of U (row p of L) in the rows above p ...
+        for row in self.u[..p].iter_mut() {
+            row.copy_within(p + 1..nf, p);
+        }
+        // ... and row p of U, shifting the rows below it up and left by one.
+        for k in p + 1..nf {
+            let (head, tail) = self.u.split_at_mut(k);
+            if let (Some(dst), Some(src)) = (head.last_mut(), tail.first()) {
+                dst[k - 1..nf - 1].copy_from_slice(&src[k..nf]);
             }
         }
         for i in p..nf - 1 {
@@ -421,15 +465,16 @@ impl<const NV: usize> BoxQp<NV> {
         let nf = self.free_count();
         // Rank-one update of the trailing block rows/cols p..nf by x = target[p..nf].
         for k in p..nf {
-            let lkk = self.l[k][k];
+            let row = &mut self.u[k];
+            let lkk = row[k];
             let xk = self.target[k];
             let r = sqrt(lkk * lkk + xk * xk);
             let (c, s) = (r / lkk, xk / lkk);
-            self.l[k][k] = r;
-            for i in k + 1..nf {
-                let lik = (self.l[i][k] + s * self.target[i]) / c;
-                self.target[i] = c * self.target[i] - s * lik;
-                self.l[i][k] = lik;
+            row[k] = r;
+            for (l, t) in row[k + 1..nf].iter_mut().zip(&mut self.target[k + 1..nf]) {
+                let lik = (*l + s * *t) / c;
+                *t = c * *t - s * lik;
+                *l = lik;
             }
         }
     }
@@ -520,14 +565,13 @@ impl<const NV: usize> BoxQp<NV> {
     /// ‖Lᵀ z‖² for z = target[..nf] (factor order).
     fn factor_norm(&mut self) -> Real {
         let nf = self.free_count();
-        self.work[..nf].fill(0.0);
-        for i in 0..nf {
-            let zi = self.target[i];
-            for (w, l) in self.work[..i + 1].iter_mut().zip(&self.l[i][..i + 1]) {
-                *w += l * zi;
-            }
+        // (Lᵀ z)_j = Σ_{i ≥ j} L_ij z_i = u[j][j..nf] · z[j..nf].
+        let mut sum = 0.0;
+        for j in 0..nf {
+            let y = dot(&self.u[j][j..nf], &self.target[j..nf]);
+            sum += y * y;
         }
-        dot(&self.work[..nf], &self.work[..nf])
+        sum
     }
 
     /// At a step of length 0: every free variable that sits at a bound while the direction
@@ -964,7 +1008,7 @@ mod tests {
             for i in 0..grouped.nf {
                 for j in 0..i {
                     if G[grouped.free[i]] != G[grouped.free[j]] {
-                        assert_eq!(grouped.l[i][j], 0.0);
+                        assert_eq!(grouped.u[j][i], 0.0);
                     }
                 }
             }
@@ -984,7 +1028,8 @@ mod tests {
         let (h, _, _, _) = random_problem::<10>(&mut rng);
         let mut qp = BoxQp::<10>::new();
         qp.factorize(&h).unwrap();
-        let old_first_row = qp.l[0];
+        // Rows 0 and 1 of L: L00, L10, L11.
+        let old_first_rows = [qp.u[0][0], qp.u[0][1], qp.u[1][1]];
         // Fix the variables at positions 2, 3 and 7: rows 0 and 1 are kept, the rest recomputed.
         let fixed = [qp.free[2], qp.free[3], qp.free[7]];
         for &var in &fixed {
@@ -992,11 +1037,11 @@ mod tests {
         }
         qp.drop_fixed(&h).unwrap();
         assert_eq!(qp.nf, 7);
-        assert_eq!(qp.l[0], old_first_row);
+        assert_eq!([qp.u[0][0], qp.u[0][1], qp.u[1][1]], old_first_rows);
         assert!(qp.free[..qp.nf].iter().all(|v| !fixed.contains(v)));
         for i in 0..qp.nf {
             for j in 0..=i {
-                let s: Real = (0..=j).map(|k| qp.l[i][k] * qp.l[j][k]).sum();
+                let s: Real = (0..=j).map(|k| qp.u[k][i] * qp.u[k][j]).sum();
                 let expect = h[qp.free[i]][qp.free[j]];
                 assert!((s - expect).abs() < 1e-12, "(LLᵀ)[{i}][{j}] = {s} vs {expect}");
             }
@@ -1081,7 +1126,7 @@ mod tests {
             for j in 0..=i {
                 let mut s = 0.0;
                 for k in 0..=j {
-                    s += qp.l[i][k] * qp.l[j][k];
+                    s += qp.u[k][i] * qp.u[k][j];
                 }
                 let expect = h[qp.free[i]][qp.free[j]];
                 assert!((s - expect).abs() < 1e-12, "(LLᵀ)[{i}][{j}] = {s} vs {expect}");
