@@ -74,7 +74,9 @@ impl<const NV: usize> Default for BoxQp<NV> {
     }
 }
 /// Σ aᵢ bᵢ over the shorter length, with 8 independent partial sums so that the
-/// loop vectorises (the summation order is fixed, so results are deterministic).
+/// loop vectorises (the summation order is fixed, so results are deterministic). The last
+/// n mod 8 elements go in pairs into two of them (then one scalar), which keeps short products
+/// (the substitutions' rows) cheap.
 #[inline]
 pub fn dot(a: &[Real], b: &[Real]) -> Real {
     let n = a.len().min(b.len());
@@ -87,8 +89,14 @@ pub fn dot(a: &[Real], b: &[Real]) -> Real {
             acc[l] += x[l] * y[l];
         }
     }
+    let (pa, pb) = (ra.chunks_exact(2), rb.chunks_exact(2));
+    let (ta, tb) = (pa.remainder(), pb.remainder());
+    for (x, y) in pa.zip(pb) {
+        acc[0] += x[0] * y[0];
+        acc[1] += x[1] * y[1];
+    }
     let mut tail = 0.0;
-    for (x, y) in ra.iter().zip(rb) {
+    for (x, y) in ta.iter().zip(tb) {
         tail += x * y;
     }
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
@@ -185,11 +193,13 @@ fn forward<const NV: usize>(
             x[c] = s / pivot;
             w[jc] = x[c];
         }
-        let lo = (j + 8).min(end);
-        let r = core::array::from_fn(|c| {
-            rows.get(c).map_or(&[][..], |row| &row[lo..end])
-        });
-        axpy8(&mut w[lo..end], &x, r);
+        if x.iter().any(|&xc| xc != 0.0) {
+            let lo = (j + 8).min(end);
+            let r = core::array::from_fn(|c| {
+                rows.get(c).map_or(&[][..], |row| &row[lo..end])
+            });
+            axpy8(&mut w[lo..end], &x, r);
+        }
         j += 8;
     }
     while j + 4 <= stop {
@@ -218,6 +228,69 @@ fn forward<const NV: usize>(
         let lo = (j + 1).min(end);
         axpy(&mut w[lo..end], x, &r[lo..end]);
         j += 1;
+    }
+}
+/// Σ_{c<8} r_c x_c, in pairs (vectorises on SSE2).
+#[inline]
+fn dot8(r: &[Real; 8], x: &[Real; 8]) -> Real {
+    ((r[0] * x[0] + r[4] * x[4]) + (r[1] * x[1] + r[5] * x[5]))
+        + ((r[2] * x[2] + r[6] * x[6]) + (r[3] * x[3] + r[7] * x[7]))
+}
+/// Backward substitution Lᵀ x = y in place on `y[..nf]` (Lᵀ = `u`, upper triangular, by rows),
+/// eight rows at a time from the bottom: solve the 8 × 8 diagonal block, then subtract its
+/// contribution from every row above it (eight contiguous entries of each: fixed-length products,
+/// no per-row loop overhead). `start[k]`: L's row k is zero before it, so the rows above
+/// min(start) of a block have no entries in its columns.
+fn backward<const NV: usize>(
+    u: &[[Real; NV]; NV],
+    y: &mut [Real; NV],
+    nf: usize,
+    start: &[usize; NV],
+) {
+    let mut hi = nf.min(NV);
+    while hi >= 8 {
+        let lo = hi - 8;
+        for i in (lo..hi).rev() {
+            triangle_row(u, y, i, hi);
+        }
+        let (Some(yb), Some(sb)) = (y.get(lo..hi), start.get(lo..hi)) else {
+            break;
+        };
+        let Ok(xb) = <[Real; 8]>::try_from(yb) else {
+            break;
+        };
+        let top = sb.iter().fold(lo, |m, &s| m.min(s));
+        if let (Some(rows), Some(ys)) = (u.get(top..lo), y.get_mut(top..lo)) {
+            for (row, yi) in rows.iter().zip(ys) {
+                if let Some(Ok(r)) = row.get(lo..hi).map(<&[Real; 8]>::try_from) {
+                    *yi -= dot8(r, &xb);
+                }
+            }
+        }
+        hi = lo;
+    }
+    for i in (0..hi).rev() {
+        triangle_row(u, y, i, hi);
+    }
+}
+/// y_i ← (y_i − Σ_{k in i+1..hi} u_ik y_k) / u_ii (one row of a backward substitution).
+#[inline]
+fn triangle_row<const NV: usize>(
+    u: &[[Real; NV]; NV],
+    y: &mut [Real; NV],
+    i: usize,
+    hi: usize,
+) {
+    let (Some(row), Some(&yi)) = (u.get(i), y.get(i)) else {
+        return;
+    };
+    let mut s = yi;
+    let (r, yk) = (row.get(i + 1..hi).unwrap_or(&[]), y.get(i + 1..hi).unwrap_or(&[]));
+    for (r, yk) in r.iter().zip(yk) {
+        s -= r * yk;
+    }
+    if let (Some(yi), Some(&pivot)) = (y.get_mut(i), row.get(i)) {
+        *yi = s / pivot;
     }
 }
 /// Violated bounds that trigger a projection restart.
@@ -415,13 +488,27 @@ impl<const NV: usize> BoxQp<NV> {
     /// time, as in [`Self::factor_rows`]), backward by rows of Lᵀ (dot products).
     fn solve_factored(&mut self) {
         let nf = self.free_count();
+        let start = self.row_starts();
         let y = &mut self.rhs;
         forward(&self.u, y, 0, nf, nf);
-        for i in (0..nf).rev() {
-            let row = &self.u[i];
-            let s = dot(&row[i + 1..nf], &y[i + 1..nf]);
-            y[i] = (y[i] - s) / row[i];
+        backward(&self.u, y, nf, &start);
+    }
+    /// For each free position i, the first position of its component (0 for one component):
+    /// L[i][..start[i]] is exactly zero (`with_groups`).
+    fn row_starts(&self) -> [usize; NV] {
+        let nf = self.free_count();
+        let mut start = [0; NV];
+        if self.groups <= 1 {
+            return start;
         }
+        let mut first = [nf; NV];
+        for i in (0..nf).rev() {
+            first[usize::from(self.group[self.var(i)]) % NV] = i;
+        }
+        for i in 0..nf {
+            start[i] = first[usize::from(self.group[self.var(i)]) % NV].min(i);
+        }
+        start
     }
     /// Remove free position `p` from the factor. With L = [L11 0 0; l21ᵀ l22 0; L31 l32 L33],
     /// the factor of H_FF without p is [L11 0; L31 L33'] with L33' L33'ᵀ = L33 L33ᵀ + l32 l32ᵀ
@@ -431,16 +518,32 @@ impl<const NV: usize> BoxQp<NV> {
         if p >= nf {
             return;
         }
-        for (t, &x) in self.target[p..nf - 1].iter_mut().zip(&self.u[p][p + 1..nf]) {
-            *t = x;
+        if let (Some(t), Some(x)) = (
+            self.target.get_mut(p..nf - 1),
+            self.u[p % NV].get(p + 1..nf),
+        ) {
+            for (t, x) in t.iter_mut().zip(x) {
+                *t = *x;
+            }
         }
-        for row in self.u[..p].iter_mut() {
-            row.copy_within(p + 1..nf, p);
+        for row in self.u.iter_mut().take(p) {
+            if let Some(seg) = row.get_mut(p..nf) {
+                if seg.len() > 1 {
+                    seg.copy_within(1.., 0);
+                }
+            }
         }
         for k in p + 1..nf {
-            let (head, tail) = self.u.split_at_mut(k);
+            let (head, tail) = self.u.split_at_mut(k.min(NV));
             if let (Some(dst), Some(src)) = (head.last_mut(), tail.first()) {
-                dst[k - 1..nf - 1].copy_from_slice(&src[k..nf]);
+                for (d, s) in dst
+                    .iter_mut()
+                    .skip(k - 1)
+                    .zip(src.iter().skip(k))
+                    .take(nf - k)
+                {
+                    *d = *s;
+                }
             }
         }
         for i in p..nf - 1 {
@@ -449,16 +552,21 @@ impl<const NV: usize> BoxQp<NV> {
         self.nf -= 1;
         let nf = self.free_count();
         for k in p..nf {
-            let row = &mut self.u[k];
-            let lkk = row[k];
-            let xk = self.target[k];
+            let row = &mut self.u[k % NV];
+            let lkk = row[k % NV];
+            let xk = self.target[k % NV];
             let r = sqrt(lkk * lkk + xk * xk);
             let (c, s) = (r / lkk, xk / lkk);
-            row[k] = r;
-            for (l, t) in row[k + 1..nf].iter_mut().zip(&mut self.target[k + 1..nf]) {
-                let lik = (*l + s * *t) / c;
-                *t = c * *t - s * lik;
-                *l = lik;
+            row[k % NV] = r;
+            if let (Some(l), Some(t)) = (
+                row.get_mut(k + 1..nf),
+                self.target.get_mut(k + 1..nf),
+            ) {
+                for (l, t) in l.iter_mut().zip(t.iter_mut()) {
+                    let lik = (*l + s * *t) / c;
+                    *t = c * *t - s * lik;
+                    *l = lik;
+                }
             }
         }
     }
