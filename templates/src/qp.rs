@@ -4,7 +4,10 @@
 //!   min ½ vᵀ H v + gᵀ v   s.t.  lo ≤ v ≤ hi,   H = Hᵀ ≻ 0,  v ∈ ℝⁿ.
 //!
 //! The working set W holds the variables fixed at a bound, F the free ones.
-//! L is the Cholesky factor of H_FF (rows and columns in the order of `free`).
+//! L is the Cholesky factor of H_FF (rows and columns in the order of `free`), stored
+//! transposed (column j of L contiguous), so that the substitutions and the updates run over
+//! contiguous slices: the forward substitution by columns (elementwise updates, eight columns at
+//! a time), the backward one by rows of Lᵀ (eight at a time), the rotations along rows of Lᵀ.
 //! Each iteration solves the equality-constrained subproblem on F,
 //!
 //!   v_F* = −H_FF⁻¹ (g_F + H_FW v_W),
@@ -167,7 +170,8 @@ fn axpy(w: &mut [Real], x: Real, r: &[Real]) {
 
 /// Forward substitution with L by columns (column j of L is row j of `u`): for j in
 /// `start..stop`, w_j ← w_j / L_jj, then w_k −= w_j L_kj for k in j + 1..`end` (end ≥ stop;
-/// the rows of L from `stop` on only receive the updates). Four columns at a time.
+/// the rows of L from `stop` on only receive the updates). Eight columns at a time (then four,
+/// then one); a block of eight exact zeros (another component's columns) is skipped.
 fn forward<const NV: usize>(u: &[[Real; NV]; NV], w: &mut [Real; NV], start: usize, stop: usize, end: usize) {
     let end = end.min(NV);
     let stop = stop.min(end);
@@ -442,7 +446,7 @@ impl<const NV: usize> BoxQp<NV> {
     ///
     /// Row i of L is the forward substitution L₁₁ x = H_{F(..i), F(i)} in column form (column j
     /// of L is row j of `u`, contiguous): w ← H's column of i; for each j, x_j = w_j / L_jj and
-    /// w_k −= x_j L_kj for k > j, four columns j at a time. The updates of w are elementwise
+    /// w_k −= x_j L_kj for k > j, eight columns j at a time. The updates of w are elementwise
     /// multiply-subtracts over contiguous slices, which vectorise on x86-64 and need no
     /// reassociation (the order of the terms of each w_k is fixed).
     fn factor_rows(&mut self, h: &[[Real; NV]; NV], from: usize) -> Result<(), QpStatus> {
@@ -727,6 +731,26 @@ impl<const NV: usize> BoxQp<NV> {
         true
     }
 
+    /// `work` = H v = H_{·W} v_W (`fixed_gradient`) + Σ_{k∈F} v_k H_{·k} (H is symmetric: rows of
+    /// H, four at a time).
+    fn hv_by_free_rows(&mut self, h: &[[Real; NV]; NV], v: &[Real; NV]) {
+        self.work = self.fixed_gradient;
+        let nf = self.free_count();
+        let mut i = 0;
+        while i + 4 <= nf {
+            let vars = [self.var(i), self.var(i + 1), self.var(i + 2), self.var(i + 3)];
+            // axpy4 subtracts: z − (−v_k) H_k.
+            let x = vars.map(|var| -v[var]);
+            axpy4(&mut self.work, x, vars.map(|var| &h[var][..]));
+            i += 4;
+        }
+        while i < nf {
+            let var = self.var(i);
+            axpy(&mut self.work, -v[var], &h[var]);
+            i += 1;
+        }
+    }
+
     /// `fixed_gradient` += H_{·,var} value (H is symmetric: its row `var`).
     fn add_fixed(&mut self, h: &[[Real; NV]; NV], var: usize, value: Real) {
         if value != 0.0 {
@@ -841,8 +865,14 @@ impl<const NV: usize> BoxQp<NV> {
             // the RELEASE_CAP most negative multipliers are freed: the subproblem on the larger
             // free set has a lower minimum, and the step towards it is a descent direction that
             // the step rule keeps feasible. Their rows are appended to the factor together
-            // (`factor_rows` from the old nf, four entries at a time): the factor one append
+            // (`factor_rows` from the old nf, one forward substitution each): the factor one append
             // each would give, up to rounding.
+            // (Hv)_W: with fewer free than fixed variables as H_{·W} v_W (kept) + Σ_{k∈F} v_k H_k
+            // (rows of H, four at a time), else one product with H per fixed variable.
+            let by_free_rows = self.free_count() < NV - self.free_count();
+            if by_free_rows {
+                self.hv_by_free_rows(h, v);
+            }
             let mut chosen = [(0.0 as Real, NV); RELEASE_CAP]; // most negative first; NV: empty
             for j in 0..NV {
                 let sign = match self.state[j] {
@@ -850,7 +880,8 @@ impl<const NV: usize> BoxQp<NV> {
                     Bound::Lower => 1.0,
                     Bound::Upper => -1.0,
                 };
-                let mut entry = (sign * (g[j] + dot(&h[j], &v[..])), j);
+                let hv = if by_free_rows { self.work[j] } else { dot(&h[j], &v[..]) };
+                let mut entry = (sign * (g[j] + hv), j);
                 if !(entry.0 < -tolerance) {
                     continue;
                 }
