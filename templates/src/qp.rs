@@ -292,9 +292,10 @@ const RESTART_VIOLATIONS: usize = 2;
 const MAX_RESTARTS: usize = 30;
 /// Variables freed per iteration at most (those with the most negative multipliers): freeing
 /// every one at once after a reference jump mostly frees variables that the next projection
-/// restart fixes again, each at the cost of a row of the factor. 6 gave the smallest slowest step
-/// of 6, 8 and unbounded on the shipped models (docs/benchmarks.md).
-const RELEASE_CAP: usize = 6;
+/// restart fixes again, each at the cost of a row of the factor. With the vectorised kernels
+/// (cheaper rows, cheaper iterations) 16 gave the smallest slowest step of 4, 6, 10 and 16 on the
+/// shipped models (docs/benchmarks.md; 6 before them).
+const RELEASE_CAP: usize = 16;
 /// A fresh factorisation orders the free variables last stage first.
 const REVERSED_ORDER: bool = true;
 
@@ -1137,6 +1138,51 @@ mod tests {
                         assert_eq!(grouped.u[j][i], 0.0);
                     }
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn blocked_kernels_on_a_size_that_is_no_multiple_of_eight() {
+        // 37 variables: the substitutions' blocks of eight, four and one, the backward blocks and
+        // the top rows; two components (the first 13 variables and the rest) for the skips.
+        const N: usize = 37;
+        let group: [u8; N] = core::array::from_fn(|i| u8::from(i >= 13));
+        let mut rng = Lcg(29);
+        for _ in 0..20 {
+            let (mut h, g, lo, hi) = random_problem::<N>(&mut rng);
+            let (mut plain, mut grouped) = (BoxQp::<N>::new(), BoxQp::<N>::with_groups(group));
+            plain.factorize(&h).unwrap();
+            // L Lᵀ = H_FF.
+            for i in 0..N {
+                for j in 0..=i {
+                    let s: Real = (0..=j).map(|k| plain.u[k][i] * plain.u[k][j]).sum();
+                    let expect = h[plain.free[i]][plain.free[j]];
+                    assert!(
+                        (s - expect).abs() < 1e-10 * expect.abs().max(1.0),
+                        "({i}, {j}): {s} vs {expect}"
+                    );
+                }
+            }
+            let mut v = [0.0; N];
+            assert_eq!(plain.solve(&h, &g, &lo, &hi, &mut v, 200).status, QpStatus::Optimal);
+            assert_kkt(&h, &g, &lo, &hi, &v);
+            for i in 0..N {
+                for j in 0..N {
+                    if group[i] != group[j] {
+                        h[i][j] = 0.0;
+                    }
+                }
+            }
+            plain.set_working_set(&[Bound::Free; N]);
+            plain.factorize(&h).unwrap();
+            grouped.factorize(&h).unwrap();
+            let (mut v, mut w) = ([0.0; N], [0.0; N]);
+            assert_eq!(plain.solve(&h, &g, &lo, &hi, &mut v, 200).status, QpStatus::Optimal);
+            assert_eq!(grouped.solve(&h, &g, &lo, &hi, &mut w, 200).status, QpStatus::Optimal);
+            assert_kkt(&h, &g, &lo, &hi, &w);
+            for i in 0..N {
+                assert!((v[i] - w[i]).abs() < 1e-10, "v[{i}] = {} vs {}", v[i], w[i]);
             }
         }
     }

@@ -303,9 +303,10 @@ const RESTART_VIOLATIONS: usize = 2;
 const MAX_RESTARTS: usize = 30;
 /// Variables freed per iteration at most (those with the most negative multipliers): freeing
 /// every one at once after a reference jump mostly frees variables that the next projection
-/// restart fixes again, each at the cost of a row of the factor. 6 gave the smallest slowest step
-/// of 6, 8 and unbounded on the shipped models (docs/benchmarks.md).
-const RELEASE_CAP: usize = 6;
+/// restart fixes again, each at the cost of a row of the factor. With the vectorised kernels
+/// (cheaper rows, cheaper iterations) 16 gave the smallest slowest step of 4, 6, 10 and 16 on the
+/// shipped models (docs/benchmarks.md; 6 before them).
+const RELEASE_CAP: usize = 16;
 /// A fresh factorisation orders the free variables last stage first.
 const REVERSED_ORDER: bool = true;
 /// Relative pivot tolerance of the factorisation.
