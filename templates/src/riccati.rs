@@ -259,50 +259,43 @@ impl RiccatiIpm {
                     }
                 }
             }
-            // Ĥ = R + δI + S + Σ + Bᵀ (P B), G = Bᵀ (P A)
+            // With the rate term, M = P B + Pxw E (the carried inputs' columns of Pxw added to
+            // P B) gives Ĥ = Bᵀ M + E Pwx B + E Pww E and G = Mᵀ A = (Bᵀ P + E Pwx) A at the cost
+            // of the plain recursion's Bᵀ (P B) and Bᵀ (P A), plus E Pwx B: O(NX NU) per
+            // rate-weighted input. Rows r of Pwx are non-zero only where Sₖ₊₁,rr is.
+            let mut mb = pb;
             let mut hh = [[0.0; NU]; NU];
-            let mut g = [[0.0; NX]; NU];
-            for m in 0..NX {
-                for r in 0..NU {
-                    let bmr = bk[m][r];
-                    for c in 0..NU {
-                        hh[r][c] += bmr * pb[m][c];
-                    }
-                    for c in 0..NX {
-                        g[r][c] += bmr * pa[m][c];
-                    }
-                }
-            }
             if has_rate {
-                // With E = Eₖ: Ĥ += Bᵀ Pxw E + E Pwx B + E Pww E, G += E Pwx A, over the rows r of
-                // Pwx that may be non-zero and are carried (Eₖ,rr = 1).
                 for r in 0..NU {
                     if !(rate_next[r] && qp.free(k, r)) {
                         continue;
                     }
-                    // (Pwx B)[r] and (Pwx A)[r]
-                    let mut wb = [0.0; NU];
-                    let mut wa = [0.0; NX];
                     for m in 0..NX {
                         let w = pxw[m][r];
+                        mb[m][r] += w;
+                        // (E Pwx B)[r]
                         for c in 0..NU {
-                            wb[c] += w * bk[m][c];
+                            hh[r][c] += w * bk[m][c];
                         }
-                        for c in 0..NX {
-                            wa[c] += w * ak[m][c];
-                        }
-                    }
-                    for c in 0..NU {
-                        hh[r][c] += wb[c];
-                        hh[c][r] += wb[c];
                     }
                     for c in 0..NU {
                         if rate_next[c] && qp.free(k, c) {
                             hh[r][c] += pww[r][c];
                         }
                     }
+                }
+            }
+            // Ĥ += R + δI + S + Σ + Bᵀ M, G = Mᵀ A (without the rate term M = P B: Bᵀ P A)
+            let mut g = [[0.0; NX]; NU];
+            for m in 0..NX {
+                for r in 0..NU {
+                    let bmr = bk[m][r];
+                    for c in 0..NU {
+                        hh[r][c] += bmr * mb[m][c];
+                    }
+                    let mmr = mb[m][r];
                     for c in 0..NX {
-                        g[r][c] += wa[c];
+                        g[r][c] += mmr * ak[m][c];
                     }
                 }
             }

@@ -235,46 +235,37 @@ impl RiccatiIpm {
                     }
                 }
             }
+            let mut mb = pb;
             let mut hh = [[0.0; NU]; NU];
-            let mut g = [[0.0; NX]; NU];
-            for m in 0..NX {
-                for r in 0..NU {
-                    let bmr = bk[m][r];
-                    for c in 0..NU {
-                        hh[r][c] += bmr * pb[m][c];
-                    }
-                    for c in 0..NX {
-                        g[r][c] += bmr * pa[m][c];
-                    }
-                }
-            }
             if has_rate {
                 for r in 0..NU {
                     if !(rate_next[r] && qp.free(k, r)) {
                         continue;
                     }
-                    let mut wb = [0.0; NU];
-                    let mut wa = [0.0; NX];
                     for m in 0..NX {
                         let w = pxw[m][r];
+                        mb[m][r] += w;
                         for c in 0..NU {
-                            wb[c] += w * bk[m][c];
+                            hh[r][c] += w * bk[m][c];
                         }
-                        for c in 0..NX {
-                            wa[c] += w * ak[m][c];
-                        }
-                    }
-                    for c in 0..NU {
-                        hh[r][c] += wb[c];
-                        hh[c][r] += wb[c];
                     }
                     for c in 0..NU {
                         if rate_next[c] && qp.free(k, c) {
                             hh[r][c] += pww[r][c];
                         }
                     }
+                }
+            }
+            let mut g = [[0.0; NX]; NU];
+            for m in 0..NX {
+                for r in 0..NU {
+                    let bmr = bk[m][r];
+                    for c in 0..NU {
+                        hh[r][c] += bmr * mb[m][c];
+                    }
+                    let mmr = mb[m][r];
                     for c in 0..NX {
-                        g[r][c] += wa[c];
+                        g[r][c] += mmr * ak[m][c];
                     }
                 }
             }

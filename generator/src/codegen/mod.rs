@@ -381,8 +381,8 @@ mod tests {
     fn auto_counts_the_rate_term_and_picks_by_flops() {
         // N = 30, NX = 12, NU = 4 (the shipped sizes): condensed 0.55 M multiply-adds without
         // structural zeros against riccati 10 × 30 × (3456 + 1728) = 1.56 M, + 0.12 M for two
-        // rate-weighted inputs; N = 100: the condensed work is cubic in N (13.5 M), the stage-wise
-        // one linear (5.2 M, 5.6 M with the rate term).
+        // rate-weighted inputs; N = 100: the condensed work is cubic in N (13.5 M by this formula),
+        // the stage-wise one linear (5.2 M, 5.6 M with the rate term).
         let (condensed, riccati) = qp_flops(12, 4, 0, 30);
         let (_, with_rate) = qp_flops(12, 4, 2, 30);
         assert_eq!(condensed, 30.0 * 30.0 / 2.0 * 4.0 * 144.0 + 120.0f64.powi(3) / 6.0);
