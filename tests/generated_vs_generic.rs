@@ -9,7 +9,8 @@ use uavgen::MpcOptions;
 use uavgen_tests::{envelope_points, shipped_model, INPUT_BOUNDS, STATE_BOUNDS};
 
 /// The generic solver for a shipped model with the default options, except the input-rate weights:
-/// the crate's own `R_DELTA` (0 for the stage-wise crate, generated with examples/mpc_no_rate.json).
+/// the crate's own `R_DELTA` (the default, 50 on u_roll and u_pitch, for every shipped crate;
+/// `default_rate_weight_in_the_riccati_crate` checks it for the stage-wise one).
 fn generic(model: &str, dt: f64, substeps: usize, horizon: usize, r_delta: &[f64]) -> GenericMpc {
     let m = shipped_model(model);
     let mut options = MpcOptions::defaults(&m);
@@ -355,6 +356,16 @@ comparisons!(pd_m100_model, pd_m100, "pd_m100", hovers: true);
 comparisons!(pd_paper_model, pd_paper, "pd_paper", hovers: false);
 // The stage-wise solver (`--qp riccati`) on the same model and problem.
 comparisons!(sindy_riccati, sindy_m100_riccati, "sindy_m100", hovers: true);
+
+/// The stage-wise crate is generated with the default options, so the comparisons above carry the
+/// input-rate term (its u₋₁ moved by `shift` in the closed loops).
+#[test]
+fn default_rate_weight_in_the_riccati_crate() {
+    let defaults = MpcOptions::defaults(&shipped_model("sindy_m100"));
+    assert_eq!(sindy_m100_riccati::R_DELTA.to_vec(), defaults.r_delta);
+    assert!(sindy_m100_riccati::R_DELTA.iter().any(|&s| s != 0.0));
+    assert_eq!(sindy_m100_riccati::R_DELTA, sindy_m100::R_DELTA);
+}
 
 macro_rules! f32_comparison {
     ($name:ident, $krate:ident) => {

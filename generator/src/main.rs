@@ -132,8 +132,8 @@ struct GenerateArgs {
     out: Option<PathBuf>,
     /// QP solver of the generated crate: `condensed` (dense box QP in the N·NU inputs, primal
     /// active set), `riccati` (stage-wise primal-dual interior point, Riccati recursion, at most
-    /// max_ipm_iterations iterations) or `auto` (the one whose fixed work per step is smaller in
-    /// flops; always `condensed` when the options have an input-rate weight, which `riccati` refuses; docs/mpc.md).
+    /// max_ipm_iterations iterations; a third of the memory) or `auto` (the one whose typical QP
+    /// work per step is smaller in flops, the input-rate term counted; docs/mpc.md).
     #[arg(long, value_enum, default_value_t = QpArg::Auto)]
     qp: QpArg,
     /// Regenerate even if --out, a crate uavgen generated, holds files uavgen did not write (they are deleted).

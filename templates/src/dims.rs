@@ -22,8 +22,8 @@ pub const Q: [Real; NX] = [1.0, 0.0];
 pub const Q_TERMINAL: [Real; NX] = [1.0, 0.0];
 /// Input weights diag(R).
 pub const R: [Real; NU] = [0.1];
-/// Input-rate weights diag(S) on uₖ − uₖ₋₁, u₋₁ = the input applied before stage 0 (the condensed
-/// solver; the stage-wise one is generated only with S = 0).
+/// Input-rate weights diag(S) on uₖ − uₖ₋₁, u₋₁ = the input applied before stage 0 (both QP
+/// solvers; docs/mpc.md).
 pub const R_DELTA: [Real; NU] = [0.5];
 /// Lower input bounds.
 pub const U_MIN: [Real; NU] = [-1.0];

@@ -6,7 +6,8 @@
 use crate::riccati::{IpmStatus, RiccatiIpm, StageQp};
 use crate::rk4::{discrete_dynamics, discrete_linearization, hold_sent_inputs, input_to_send, is_sent};
 use crate::{
-    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_IPM_ITERATIONS, N, NU, NX, Q, Q_TERMINAL, R, TRUST_BOUND, U_MAX, U_MIN,
+    Real, ENVELOPE_HI, ENVELOPE_LO, INPUT_LEAD, MAX_IPM_ITERATIONS, N, NU, NX, Q, Q_TERMINAL, R, R_DELTA, TRUST_BOUND,
+    U_MAX, U_MIN,
 };
 
 /// What happened in a solve.
@@ -35,7 +36,7 @@ pub struct Solution {
     pub status: Status,
     /// Interior-point iterations of the QP.
     pub qp_iterations: usize,
-    /// ½ Σ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ ūₖᵀ R ūₖ of the plan after this step.
+    /// ½ Σ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ (ūₖᵀ R ūₖ + Δ̄ₖᵀ S Δ̄ₖ) of the plan after this step.
     pub cost: Real,
 }
 
@@ -61,6 +62,8 @@ pub struct Mpc {
     xs: [[Real; NX]; N + 1],
     /// Guess ū₀..ū_{N−1}.
     us: [[Real; NU]; N],
+    /// u₋₁: the input applied over the sample before stage 0 (where the rate term Δ₀ starts).
+    u_prev: [Real; NU],
     reference: [[Real; NX]; N + 1],
     has_reference: bool,
     /// Aₖ = ∂F/∂x, Bₖ = ∂F/∂u at the guess; cₖ = F(x̄ₖ, ūₖ) − x̄ₖ₊₁.
@@ -128,6 +131,7 @@ impl Mpc {
         Self {
             xs: [[0.0; NX]; N + 1],
             us: [[0.0; NU]; N],
+            u_prev: [0.0; NU],
             reference: [[0.0; NX]; N + 1],
             has_reference: false,
             a: [[[0.0; NX]; NX]; N],
@@ -149,6 +153,7 @@ impl Mpc {
         let u = clamp_input(u);
         self.xs = [*x0; N + 1];
         self.us = [u; N];
+        self.u_prev = u;
         self.phase = Phase::Stale;
     }
 
@@ -162,6 +167,8 @@ impl Mpc {
         for k in 0..N {
             self.us[k] = clamp_input(&us[k]);
         }
+        // u₋₁ (the input applied before the plan, set by `initialize` and `shift`) is not part of
+        // the guess: it stays.
         self.phase = Phase::Stale;
         true
     }
@@ -201,7 +208,19 @@ impl Mpc {
                 self.hi[k][i] = U_MAX[i] - self.us[k][i];
             }
         }
-        if self.qp.prepare(&self.a, &self.b, &self.lo, &self.hi) {
+        let qp = StageQp {
+            a: &self.a,
+            b: &self.b,
+            c: &self.c,
+            e: &self.e,
+            us: &self.us,
+            u_prev: &self.u_prev,
+            s: &R_DELTA,
+            lead: &INPUT_LEAD,
+            lo: &self.lo,
+            hi: &self.hi,
+        };
+        if self.qp.prepare(&qp) {
             self.phase = Phase::Prepared;
             Status::Solved
         } else {
@@ -246,7 +265,8 @@ impl Mpc {
         }
     }
 
-    /// ½ Σₖ₌₀ᴺ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ ūₖᵀ R ūₖ of the guess (0 without a reference).
+    /// ½ Σₖ₌₀ᴺ (x̄ₖ − rₖ)ᵀ Qₖ (x̄ₖ − rₖ) + ½ Σ (ūₖᵀ R ūₖ + Δ̄ₖᵀ S Δ̄ₖ) of the guess, Δ̄ₖ = ūₖ − ūₖ₋₁
+    /// (ū₋₁ = u₋₁; 0 without a reference).
     fn cost(&self) -> Real {
         if !self.has_reference {
             return 0.0;
@@ -260,8 +280,10 @@ impl Mpc {
             }
         }
         for k in 0..N {
+            let before = if k == 0 { &self.u_prev } else { &self.us[k - 1] };
             for i in 0..NU {
-                cost += 0.5 * R[i] * self.us[k][i] * self.us[k][i];
+                let d = self.us[k][i] - before[i];
+                cost += 0.5 * (R[i] * self.us[k][i] * self.us[k][i] + R_DELTA[i] * d * d);
             }
         }
         if cost.is_finite() {
@@ -320,6 +342,9 @@ impl Mpc {
             c: &self.c,
             e: &self.e,
             us: &self.us,
+            u_prev: &self.u_prev,
+            s: &R_DELTA,
+            lead: &INPUT_LEAD,
             lo: &self.lo,
             hi: &self.hi,
         };
@@ -338,8 +363,9 @@ impl Mpc {
         let mut dx = z0;
         for k in 0..N {
             let (a, b) = (&self.a[k], &self.b[k]);
-            // Inputs sent already stay as they were: their column of Bₖ is zero, which decouples
-            // them in the QP, so the others' steps do not depend on theirs.
+            // Inputs sent already stay as they were: their column of Bₖ is zero and their rate is
+            // not a decision, which decouples them in the QP, so the others' steps do not depend
+            // on theirs.
             let mut v = self.qp.v[k];
             for j in 0..NU {
                 if is_sent(k, j) {
@@ -397,6 +423,8 @@ impl Mpc {
     /// Move the guess one sample ahead: x̄ₖ ← x̄ₖ₊₁, ūₖ ← ūₖ₊₁, the last input
     /// repeated and x̄_N ← F(x̄_{N−1}, ū_{N−1}); the stored reference shifts alike.
     pub fn shift(&mut self) {
+        // Stage 0's input is the one applied over the sample that now lies before the plan.
+        self.u_prev = self.us[0];
         for k in 0..N {
             self.xs[k] = self.xs[k + 1];
             self.reference[k] = self.reference[k + 1];
@@ -441,8 +469,9 @@ mod tests {
 
     #[test]
     fn matches_the_condensed_solver_on_random_guesses() {
-        // The same RTI step by the condensed active-set solver (mpc.rs) and by the Riccati
-        // interior-point method: plans agree to 1e-6 (the generated-vs-generic tolerance).
+        // The same RTI step, input-rate term included (u₋₁ from `initialize`), by the condensed
+        // active-set solver (mpc.rs) and by the Riccati interior-point method: plans agree to 1e-6
+        // (the generated-vs-generic tolerance).
         let mut seed: u64 = 17;
         let mut next = move || {
             seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -460,9 +489,11 @@ mod tests {
             }
             let x0 = [2.0 * next(), 2.0 * next()];
             let r = reference(3.0 * next());
-            // The stage-wise solver has no input-rate term: compare at S = 0.
-            let mut dense = crate::mpc::Mpc::new().without_rate_term();
+            let u_prev = [1.2 * next()];
+            let mut dense = crate::mpc::Mpc::new();
             let mut staged = Mpc::new();
+            dense.initialize(&x0, &u_prev);
+            staged.initialize(&x0, &u_prev);
             assert!(dense.set_guess(&xs, &us) && staged.set_guess(&xs, &us));
             let a = dense.solve(&x0, &r);
             let b = staged.solve(&x0, &r);
@@ -479,6 +510,37 @@ mod tests {
     }
 
     #[test]
+    fn closed_loops_match_the_condensed_solver() {
+        // 200 steps with shift (u₋₁ ← ū₀ each time) towards setpoints that saturate the input:
+        // the rate term's u₋₁ moves with the plan, and both solvers send the same inputs.
+        assert!(
+            R_DELTA.iter().any(|&s| s != 0.0),
+            "the template's example has a rate weight"
+        );
+        for target in [0.5, -3.0, 40.0] {
+            let mut dense = crate::mpc::Mpc::new();
+            let mut staged = Mpc::new();
+            let (mut x, mut y) = ([0.3, -0.2], [0.3, -0.2]);
+            let mut worst: Real = 0.0;
+            for step in 0..200 {
+                let a = dense.solve(&x, &reference(target));
+                let b = staged.solve(&y, &reference(target));
+                assert_eq!(a.status, crate::mpc::Status::Solved);
+                assert_eq!(b.status, Status::Solved);
+                let d = (a.u0[0] - b.u0[0]).abs();
+                worst = worst.max(d);
+                assert!(d <= 1e-6, "target {target}, step {step}: {} vs {}", a.u0[0], b.u0[0]);
+                assert!((a.cost - b.cost).abs() <= 1e-6 * a.cost.abs().max(1.0), "step {step}");
+                x = discrete_dynamics(&x, &a.u0);
+                y = discrete_dynamics(&y, &b.u0);
+                dense.shift();
+                staged.shift();
+            }
+            assert!(worst <= 1e-6);
+        }
+    }
+
+    #[test]
     fn closed_loop_reaches_the_setpoint_within_bounds() {
         let mut mpc = Mpc::new();
         let mut x = [0.0, 0.0];
@@ -491,7 +553,10 @@ mod tests {
             x = discrete_dynamics(&x, &s.u0);
             mpc.shift();
         }
-        assert!((x[0] - 0.25 / 0.35 / 2.0).abs() < 0.01, "x = {x:?}");
+        // Without the rate term the rest point is x₀ = 0.25 / 0.35 / 2 ≈ 0.357 (mpc.rs's test); the
+        // finite horizon, the terminal weight and the rate term within the plan move it to 0.346
+        // (the condensed solver's, to 1e-6: `closed_loops_match_the_condensed_solver`).
+        assert!((x[0] - 0.346).abs() < 0.01, "x = {x:?}");
         assert!(x[1].abs() < 1e-3);
         assert!(max_iterations <= MAX_IPM_ITERATIONS);
     }
@@ -519,6 +584,9 @@ mod tests {
             c: &mpc.c,
             e: &mpc.e,
             us: &mpc.us,
+            u_prev: &mpc.u_prev,
+            s: &R_DELTA,
+            lead: &INPUT_LEAD,
             lo: &mpc.lo,
             hi: &mpc.hi,
         };

@@ -1,28 +1,46 @@
 //! Stage-wise box QP of one RTI step by a primal-dual interior-point method (Mehrotra
 //! predictor-corrector) whose Newton systems are solved by a Riccati recursion over the N stages:
 //!
-//!   min  ½ Σₖ₌₀ᴺ (eₖ + xₖ)ᵀ Wₖ (eₖ + xₖ) + ½ Σₖ₌₀ᴺ⁻¹ (ūₖ + vₖ)ᵀ R (ūₖ + vₖ) + ½ δ ‖vₖ‖²
+//!   min  ½ Σₖ₌₀ᴺ (eₖ + xₖ)ᵀ Wₖ (eₖ + xₖ) + ½ Σₖ₌₀ᴺ⁻¹ [(ūₖ + vₖ)ᵀ R (ūₖ + vₖ) + δ ‖vₖ‖² + dₖᵀ Sₖ dₖ]
 //!   s.t. x₀ = z₀,  xₖ₊₁ = Aₖ xₖ + Bₖ vₖ + cₖ,  loₖ ≤ vₖ ≤ hiₖ,
 //!
 //! with x = δx the state step, v the input step, eₖ = x̄ₖ − rₖ, Wₖ = diag(Q) (k < N), W_N =
-//! diag(Q_N), δ = `REGULARISATION` (the condensed solver's δI). Only the inputs are bounded.
+//! diag(Q_N), δ = `REGULARISATION` (the condensed solver's δI), and the input-rate term: dₖ = Δ̄ₖ +
+//! vₖ − wₖ the rate uₖ − uₖ₋₁ of the new plan (Δ̄ₖ = ūₖ − ūₖ₋₁ of the guess, ū₋₁ = u₋₁ fixed), wₖ
+//! = Eₖ₋₁ vₖ₋₁ the previous stage's input step (w₀ = 0). An input sent already (k below its lead,
+//! docs/mpc.md "Input delays") is held: its column of Bₖ is zero (the caller's), its rate weight
+//! in Sₖ = diag(S · [k ≥ lead]) is 0 and Eₖ = diag([k ≥ lead]) does not carry its step to the next
+//! stage, so its v is decoupled from everything (and discarded by the caller). Only the inputs are
+//! bounded.
+//!
+//! The rate term makes the previous input step part of the state, x̃ₖ = (xₖ, wₖ), with the trivial
+//! dynamics wₖ₊₁ = Eₖ vₖ; the augmented stage has Ã = blkdiag(Aₖ, 0), B̃ = (Bₖ; Eₖ), state weight
+//! blkdiag(Wₖ, Sₖ) and the cross weight −Sₖ between wₖ and vₖ. Its structure is used throughout: the
+//! value function's Hessian P̃ = (Pxx Pxw; Pwx Pww) is local to the factorisation, only the gain
+//! on x is stored (Kₖ, as without the rate term), and the gain on w is Ĥₖ⁻¹ Sₖ, applied through the
+//! stored factor of Ĥₖ.
 //!
 //! Slacks t_l = v − lo, t_u = hi − v ≥ 0 with multipliers λ_l, λ_u ≥ 0. The iterate's states are
 //! always the rollout of its inputs (the dynamics hold exactly), so a Newton step is the LQ problem
-//! with stage Hessians (Wₖ, R + δI + Σₖ), Σ = λ_l/t_l + λ_u/t_u, zero defects, and linear terms
+//! with stage Hessians (blkdiag(Wₖ, Sₖ), R + δI + Sₖ + Σₖ), Σ = λ_l/t_l + λ_u/t_u, zero defects, and
+//! linear terms
 //!
-//!   qₖ = Wₖ (eₖ + xₖ),  ρₖ = (R + δI) vₖ + R ūₖ + (λ_l r_l + c_l − σμ)/t_l − (λ_u r_u + c_u − σμ)/t_u,
+//!   qₖ = (Wₖ (eₖ + xₖ), −Sₖ dₖ),
+//!   ρₖ = (R + δI) vₖ + R ūₖ + Sₖ dₖ + (λ_l r_l + c_l − σμ)/t_l − (λ_u r_u + c_u − σμ)/t_u,
 //!
 //! (r_l = v − lo − t_l, r_u = hi − v − t_u, c the corrector's second-order term). The Riccati
-//! factorisation, backwards from P_N = W_N,
+//! factorisation, backwards from Pxx = W_N, Pxw = 0, Pww = 0,
 //!
-//!   Ĥₖ = R + δI + Σₖ + Bₖᵀ P Bₖ = Lₖ Lₖᵀ,  Gₖ = Bₖᵀ P Aₖ,  Kₖ = −Ĥₖ⁻¹ Gₖ,
-//!   P ← Wₖ + Aₖᵀ P Aₖ + Gₖᵀ Kₖ,
+//!   Ĥₖ = R + δI + Sₖ + Σₖ + Bₖᵀ Pxx Bₖ + Bₖᵀ Pxw Eₖ + Eₖ Pwx Bₖ + Eₖ Pww Eₖ = Lₖ Lₖᵀ,
+//!   Gₖ = (Bₖᵀ Pxx + Eₖ Pwx) Aₖ,  Kₖ = −Ĥₖ⁻¹ Gₖ,
+//!   Pxx ← Wₖ + Aₖᵀ Pxx Aₖ + Gₖᵀ Kₖ,  Pxw ← −Kₖᵀ Sₖ,  Pww ← Sₖ − Sₖ Ĥₖ⁻¹ Sₖ,
 //!
 //! costs O(N (NX³ + NX² NU)) and is shared by the predictor and the corrector; each of those is a
-//! backward pass ĝₖ = ρₖ + Bₖᵀ p, κₖ = −Ĥₖ⁻¹ ĝₖ, p ← qₖ + Aₖᵀ p + Kₖᵀ ĝₖ (p_N = q_N) and a forward
-//! pass dvₖ = Kₖ dxₖ + κₖ, dxₖ₊₁ = Aₖ dxₖ + Bₖ dvₖ (dx₀ = 0), O(N NX²). The work of a solve is at
-//! most `MAX_IPM_ITERATIONS` such iterations whatever the data: bounded by construction.
+//! backward pass ĝₖ = ρₖ + Bₖᵀ p + Eₖ p_w, κₖ = −Ĥₖ⁻¹ ĝₖ, p ← qₖ + Aₖᵀ p + Kₖᵀ ĝₖ, p_w ← −Sₖ (dₖ +
+//! κₖ) (p_N = q_N, p_w = 0) and a forward pass dvₖ = Kₖ dxₖ + Ĥₖ⁻¹ Sₖ dwₖ + κₖ, dxₖ₊₁ = Aₖ dxₖ +
+//! Bₖ dvₖ, dwₖ₊₁ = Eₖ dvₖ (dx₀ = 0, dw₀ = 0), O(N NX²). The rate term's extra work is confined to
+//! the inputs with Sᵣ ≠ 0. The work of a solve is at most `MAX_IPM_ITERATIONS` such iterations
+//! whatever the data: bounded by construction.
 
 use crate::math::sqrt;
 use crate::{Real, N, NU, NX, Q, Q_TERMINAL, R, REGULARISATION};
@@ -56,8 +74,51 @@ pub struct StageQp<'a> {
     pub e: &'a [[Real; NX]; N + 1],
     /// ūₖ
     pub us: &'a [[Real; NU]; N],
+    /// u₋₁: the input applied before stage 0 (where the first rate starts).
+    pub u_prev: &'a [Real; NU],
+    /// diag(S), the input-rate weight.
+    pub s: &'a [Real; NU],
+    /// Each input's lead: input i is held at the stages k < `lead[i]` (docs/mpc.md "Input delays").
+    pub lead: &'a [usize; NU],
     pub lo: &'a [[Real; NU]; N],
     pub hi: &'a [[Real; NU]; N],
+}
+
+impl StageQp<'_> {
+    /// Whether input i at stage k is a decision (not held): the diagonal of Eₖ.
+    #[inline]
+    fn free(&self, k: usize, i: usize) -> bool {
+        k >= self.lead[i]
+    }
+
+    /// (Sₖ)ᵢ: the rate weight of input i at stage k, 0 for a held input (its rate is a constant).
+    #[inline]
+    fn rate_weight(&self, k: usize, i: usize) -> Real {
+        if self.free(k, i) {
+            self.s[i]
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether any input has a rate weight (the rate term's work is skipped otherwise).
+    #[inline]
+    fn has_rate(&self) -> bool {
+        self.s.iter().any(|&s| s != 0.0)
+    }
+
+    /// dₖ,ᵢ = Δ̄ₖ,ᵢ + vₖ,ᵢ − wₖ,ᵢ: the rate of input i at stage k for the input steps v.
+    #[inline]
+    fn rate(&self, v: &[[Real; NU]; N], k: usize, i: usize) -> Real {
+        let (before, w) = if k == 0 {
+            (self.u_prev[i], 0.0)
+        } else if self.free(k - 1, i) {
+            (self.us[k - 1][i], v[k - 1][i])
+        } else {
+            (self.us[k - 1][i], 0.0)
+        };
+        self.us[k][i] - before + v[k][i] - w
+    }
 }
 
 /// Fraction of the distance to the boundary a step may go.
@@ -148,15 +209,11 @@ impl RiccatiIpm {
 
     /// The start point that does not depend on x₀ (v = 0, slacks at least `INITIAL_SLACK` of the
     /// box width, λ = 1) and the Riccati factorisation for it: the part of the first iteration
-    /// that can run in `prepare`. False if a number is not finite.
-    pub fn prepare(
-        &mut self,
-        a: &[[[Real; NX]; NX]; N],
-        b: &[[[Real; NU]; NX]; N],
-        lo: &[[Real; NU]; N],
-        hi: &[[Real; NU]; N],
-    ) -> bool {
+    /// that can run in `prepare` (it reads Aₖ, Bₖ, S, the leads and the box of `qp`). False if a
+    /// number is not finite.
+    pub fn prepare(&mut self, qp: &StageQp) -> bool {
         self.regularised = false;
+        let (lo, hi) = (qp.lo, qp.hi);
         for k in 0..N {
             for i in 0..NU {
                 let floor = INITIAL_SLACK * (hi[k][i] - lo[k][i]).max(Real::EPSILON);
@@ -167,20 +224,27 @@ impl RiccatiIpm {
                 self.lam_u[k][i] = 1.0;
             }
         }
-        self.factored = self.factorize(a, b);
+        self.factored = self.factorize(qp);
         self.factored
     }
 
     /// Riccati factorisation for Σ of the current iterate (the module docs' recursion).
     /// False if a number is not finite; a non-positive pivot of Ĥₖ is raised (`regularised`).
-    fn factorize(&mut self, a: &[[[Real; NX]; NX]; N], b: &[[[Real; NU]; NX]; N]) -> bool {
+    fn factorize(&mut self, qp: &StageQp) -> bool {
         let mut p = [[0.0; NX]; NX];
         for i in 0..NX {
             p[i][i] = Q_TERMINAL[i];
         }
+        // The rate term's blocks of the value function's Hessian: Pxw (column r non-zero only where
+        // the next stage's rate weight is) and Pww; zero at N.
+        let mut pxw = [[0.0; NU]; NX];
+        let mut pww = [[0.0; NU]; NU];
+        // Columns r of Pxw / rows of Pww that may be non-zero (Sₖ₊₁ ≠ 0 there).
+        let mut rate_next = [false; NU];
+        let has_rate = qp.has_rate();
         let mut finite = true;
         for k in (0..N).rev() {
-            let (ak, bk) = (&a[k], &b[k]);
+            let (ak, bk) = (&qp.a[k], &qp.b[k]);
             // PA = P Aₖ, PB = P Bₖ (row r: Σₘ P[r][m] A[m], axpys of contiguous rows)
             let mut pa = [[0.0; NX]; NX];
             let mut pb = [[0.0; NU]; NX];
@@ -195,23 +259,52 @@ impl RiccatiIpm {
                     }
                 }
             }
-            // Ĥ = R + δI + Σ + Bᵀ (P B), G = Bᵀ (P A)
+            // With the rate term, M = P B + Pxw E (the carried inputs' columns of Pxw added to
+            // P B) gives Ĥ = Bᵀ M + E Pwx B + E Pww E and G = Mᵀ A = (Bᵀ P + E Pwx) A at the cost
+            // of the plain recursion's Bᵀ (P B) and Bᵀ (P A), plus E Pwx B: O(NX NU) per
+            // rate-weighted input. Rows r of Pwx are non-zero only where Sₖ₊₁,rr is.
+            let mut mb = pb;
             let mut hh = [[0.0; NU]; NU];
+            if has_rate {
+                for r in 0..NU {
+                    if !(rate_next[r] && qp.free(k, r)) {
+                        continue;
+                    }
+                    for m in 0..NX {
+                        let w = pxw[m][r];
+                        mb[m][r] += w;
+                        // (E Pwx B)[r]
+                        for c in 0..NU {
+                            hh[r][c] += w * bk[m][c];
+                        }
+                    }
+                    for c in 0..NU {
+                        if rate_next[c] && qp.free(k, c) {
+                            hh[r][c] += pww[r][c];
+                        }
+                    }
+                }
+            }
+            // Ĥ += R + δI + S + Σ + Bᵀ M, G = Mᵀ A (without the rate term M = P B: Bᵀ P A)
             let mut g = [[0.0; NX]; NU];
             for m in 0..NX {
                 for r in 0..NU {
                     let bmr = bk[m][r];
                     for c in 0..NU {
-                        hh[r][c] += bmr * pb[m][c];
+                        hh[r][c] += bmr * mb[m][c];
                     }
+                    let mmr = mb[m][r];
                     for c in 0..NX {
-                        g[r][c] += bmr * pa[m][c];
+                        g[r][c] += mmr * ak[m][c];
                     }
                 }
             }
             for i in 0..NU {
-                hh[i][i] +=
-                    R[i] + REGULARISATION + self.lam_l[k][i] / self.t_l[k][i] + self.lam_u[k][i] / self.t_u[k][i];
+                hh[i][i] += R[i]
+                    + REGULARISATION
+                    + qp.rate_weight(k, i)
+                    + self.lam_l[k][i] / self.t_l[k][i]
+                    + self.lam_u[k][i] / self.t_u[k][i];
             }
             // Ĥ = L Lᵀ
             let mut l = [[0.0; NU]; NU];
@@ -267,27 +360,58 @@ impl RiccatiIpm {
                     next[r][r] += w[r];
                 }
                 p = next;
+                if has_rate {
+                    // Pxw ← −Kᵀ S, Pww ← S − S Ĥ⁻¹ S (columns r with Sₖ,rr ≠ 0)
+                    pww = [[0.0; NU]; NU];
+                    for r in 0..NU {
+                        let s = qp.rate_weight(k, r);
+                        rate_next[r] = s != 0.0;
+                        for m in 0..NX {
+                            pxw[m][r] = -kk[r][m] * s;
+                        }
+                        if s != 0.0 {
+                            let mut y = [0.0; NU];
+                            y[r] = s;
+                            solve_cholesky(&l, &mut y);
+                            for i in 0..NU {
+                                pww[i][r] = -qp.rate_weight(k, i) * y[i];
+                            }
+                            pww[r][r] += s;
+                        }
+                    }
+                    finite &= pxw.iter().all(|row| row.iter().all(|v| v.is_finite()))
+                        && pww.iter().all(|row| row.iter().all(|v| v.is_finite()));
+                }
             }
             finite &= p.iter().all(|row| row.iter().all(|v| v.is_finite()));
         }
         finite
     }
 
-    /// Backward pass for the linear terms (qₖ from the iterate's states, ρₖ from `rho`), then the
-    /// forward pass: the Newton direction in `dv`, `dx`.
+    /// Backward pass for the linear terms (qₖ from the iterate's states and rates, ρₖ from `rho`),
+    /// then the forward pass: the Newton direction in `dv`, `dx`.
     fn direction(&mut self, qp: &StageQp, rho: &[[Real; NU]; N]) {
-        // p_N = q_N = W_N (e_N + x_N)
+        let has_rate = qp.has_rate();
+        // p_N = q_N = W_N (e_N + x_N), p_w = 0
         let mut p = [0.0; NX];
         for i in 0..NX {
             p[i] = Q_TERMINAL[i] * (qp.e[N][i] + self.x[N][i]);
         }
+        let mut pw = [0.0; NU];
         for k in (0..N).rev() {
             let (ak, bk) = (&qp.a[k], &qp.b[k]);
-            // ĝ = ρ + Bᵀ p
+            // ĝ = ρ + Bᵀ p + E p_w
             let mut gh = rho[k];
             for m in 0..NX {
                 for r in 0..NU {
                     gh[r] += bk[m][r] * p[m];
+                }
+            }
+            if has_rate {
+                for r in 0..NU {
+                    if qp.free(k, r) {
+                        gh[r] += pw[r];
+                    }
                 }
             }
             // κ = −Ĥ⁻¹ ĝ
@@ -318,10 +442,17 @@ impl RiccatiIpm {
                     }
                 }
                 p = next;
+                // p_w ← −S (d + κ)
+                if has_rate {
+                    for r in 0..NU {
+                        pw[r] = -qp.rate_weight(k, r) * (qp.rate(&self.v, k, r) + kappa[r]);
+                    }
+                }
             }
         }
-        // dv = K dx + κ, dx⁺ = A dx + B dv, dx₀ = 0
+        // dv = K dx + Ĥ⁻¹ S dw + κ, dx⁺ = A dx + B dv, dw⁺ = E dv; dx₀ = 0, dw₀ = 0
         let mut dx = [0.0; NX];
+        let mut dw = [0.0; NU];
         self.dx[0] = dx;
         for k in 0..N {
             let (ak, bk, kk) = (&qp.a[k], &qp.b[k], &self.k[k]);
@@ -329,6 +460,20 @@ impl RiccatiIpm {
             for r in 0..NU {
                 for c in 0..NX {
                     dv[r] += kk[r][c] * dx[c];
+                }
+            }
+            if has_rate && k > 0 {
+                let mut y = [0.0; NU];
+                let mut any = false;
+                for r in 0..NU {
+                    y[r] = qp.rate_weight(k, r) * dw[r];
+                    any |= y[r] != 0.0;
+                }
+                if any {
+                    solve_cholesky(&self.l[k], &mut y);
+                    for r in 0..NU {
+                        dv[r] += y[r];
+                    }
                 }
             }
             let mut next = [0.0; NX];
@@ -342,19 +487,25 @@ impl RiccatiIpm {
                 }
                 next[r] = s;
             }
+            for r in 0..NU {
+                dw[r] = if qp.free(k, r) { dv[r] } else { 0.0 };
+            }
             self.dv[k] = dv;
             dx = next;
             self.dx[k + 1] = dx;
         }
     }
 
-    /// ‖∇ᵥ L‖∞ = max |(R + δI) v + R ū + Bᵀ p − λ_l + λ_u| with the adjoint p of the iterate's
-    /// states: the stationarity residual (the dynamics hold exactly at every iterate).
+    /// ‖∇ᵥ L‖∞ = max |(R + δI) v + R ū + S d − Eₖ Sₖ₊₁ dₖ₊₁ + Bᵀ p − λ_l + λ_u| with the adjoint p of
+    /// the iterate's states: the stationarity residual (the dynamics hold exactly at every iterate).
     fn stationarity(&self, qp: &StageQp) -> Real {
+        let has_rate = qp.has_rate();
         let mut p = [0.0; NX];
         for i in 0..NX {
             p[i] = Q_TERMINAL[i] * (qp.e[N][i] + self.x[N][i]);
         }
+        // p_w of stage k + 1: −Sₖ₊₁ dₖ₊₁ (0 at N)
+        let mut pw = [0.0; NU];
         let mut worst: Real = 0.0;
         for k in (0..N).rev() {
             let (ak, bk) = (&qp.a[k], &qp.b[k]);
@@ -363,6 +514,14 @@ impl RiccatiIpm {
                     (R[r] + REGULARISATION) * self.v[k][r] + R[r] * qp.us[k][r] - self.lam_l[k][r] + self.lam_u[k][r];
                 for m in 0..NX {
                     s += bk[m][r] * p[m];
+                }
+                if has_rate {
+                    let d = qp.rate_weight(k, r) * qp.rate(&self.v, k, r);
+                    if qp.free(k, r) {
+                        s += pw[r];
+                    }
+                    s += d;
+                    pw[r] = -d;
                 }
                 // NaN-propagating maximum
                 worst = if s.abs() > worst || s.is_nan() { s.abs() } else { worst };
@@ -456,7 +615,7 @@ impl RiccatiIpm {
                 };
             }
             iterations += 1;
-            if !self.factored && !self.factorize(qp.a, qp.b) {
+            if !self.factored && !self.factorize(qp) {
                 return IpmResult {
                     status: IpmStatus::NumericalFailure,
                     iterations,
@@ -529,6 +688,7 @@ impl RiccatiIpm {
                 };
                 rho[k][i] = (R[i] + REGULARISATION) * self.v[k][i]
                     + R[i] * qp.us[k][i]
+                    + qp.rate_weight(k, i) * qp.rate(&self.v, k, i)
                     + (self.lam_l[k][i] * r_l[k][i] + c_l - sigma_mu) / self.t_l[k][i]
                     - (self.lam_u[k][i] * r_u[k][i] + c_u - sigma_mu) / self.t_u[k][i];
             }
@@ -609,6 +769,9 @@ mod tests {
         lo: [[Real; NU]; N],
         hi: [[Real; NU]; N],
         z0: [Real; NX],
+        u_prev: [Real; NU],
+        s: [Real; NU],
+        lead: [usize; NU],
     }
 
     impl Data {
@@ -619,14 +782,27 @@ mod tests {
                 c: &self.c,
                 e: &self.e,
                 us: &self.us,
+                u_prev: &self.u_prev,
+                s: &self.s,
+                lead: &self.lead,
                 lo: &self.lo,
                 hi: &self.hi,
             }
         }
 
         fn solve(&self, ipm: &mut RiccatiIpm) -> IpmResult {
-            assert!(ipm.prepare(&self.a, &self.b, &self.lo, &self.hi));
+            assert!(ipm.prepare(&self.qp()));
             ipm.solve(&self.qp(), &self.z0, 50)
+        }
+
+        /// Input i held at stages k < `lead`: its column of Bₖ zeroed, as `hold_sent_inputs` does.
+        fn hold(&mut self, i: usize, lead: usize) {
+            self.lead[i] = lead;
+            for k in 0..lead {
+                for row in self.b[k].iter_mut() {
+                    row[i] = 0.0;
+                }
+            }
         }
     }
 
@@ -641,6 +817,9 @@ mod tests {
             lo: [[0.0; NU]; N],
             hi: [[0.0; NU]; N],
             z0: [0.0; NX],
+            u_prev: [0.0; NU],
+            s: [0.0; NU],
+            lead: [0; NU],
         };
         for k in 0..N {
             for r in 0..NX {
@@ -666,6 +845,9 @@ mod tests {
         }
         for i in 0..NX {
             d.z0[i] = rng.next();
+        }
+        for i in 0..NU {
+            d.u_prev[i] = rng.next();
         }
         d
     }
@@ -716,6 +898,32 @@ mod tests {
                     s += R[r % NU] + REGULARISATION;
                 }
                 h[r][c] = s;
+            }
+        }
+        // The rate term ½ Σ Sᵢ (uₖ,ᵢ − uₖ₋₁,ᵢ)² (u₋₁ fixed) as the condensed solver adds it, and the
+        // held inputs decoupled (H entry 1, gradient 0: their step is 0).
+        let held = |k: usize, i: usize| k < d.lead[i];
+        let rate = |k: usize, i: usize| d.us[k][i] - if k == 0 { d.u_prev[i] } else { d.us[k - 1][i] };
+        for k in 0..N {
+            for i in 0..NU {
+                let r = k * NU + i;
+                if held(k, i) {
+                    h[r] = [0.0; NV];
+                    for row in h.iter_mut() {
+                        row[r] = 0.0;
+                    }
+                    h[r][r] = 1.0;
+                    g[r] = 0.0;
+                    continue;
+                }
+                let s = d.s[i];
+                let later = k + 1 < N;
+                h[r][r] += if later { 2.0 * s } else { s };
+                if k > 0 && !held(k - 1, i) {
+                    h[r][r - NU] -= s;
+                    h[r - NU][r] -= s;
+                }
+                g[r] += s * (rate(k, i) - if later { rate(k + 1, i) } else { 0.0 });
             }
         }
         let lo: [Real; NV] = core::array::from_fn(|i| d.lo[i / NU][i % NU]);
@@ -811,10 +1019,83 @@ mod tests {
     }
 
     #[test]
+    fn the_rate_term_and_held_inputs_match_the_condensed_active_set_solver() {
+        // S on uₖ − uₖ₋₁ (u₋₁ fixed, ū random), with some inputs held for a few stages (their
+        // columns of B zero): the augmented recursion against the condensed QP with the rate term
+        // added as the condensed solver adds it. Held inputs' steps are not decisions (the caller
+        // discards them); every other step must agree.
+        let mut rng = Lcg(77);
+        let mut worst: Real = 0.0;
+        for (case, width) in [0.05, 0.3, 1.0, 100.0].into_iter().cycle().take(60).enumerate() {
+            let mut d = random_data(&mut rng, width);
+            for i in 0..NU {
+                // 0, 0.5, 5, 50, 500 (the default is 50)
+                d.s[i] = if (case + i) % 5 == 0 {
+                    0.0
+                } else {
+                    0.05 * Real::powi(10.0, ((case + i) % 5) as i32)
+                };
+                if (case / 2 + i) % 3 == 1 {
+                    d.hold(i, 1 + (case + 3 * i) % 5);
+                }
+            }
+            let mut ipm = RiccatiIpm::new();
+            let r = d.solve(&mut ipm);
+            assert_eq!(r.status, IpmStatus::Optimal, "case {case}");
+            let v = condensed_solution(&d);
+            for k in 0..N {
+                for i in 0..NU {
+                    if k < d.lead[i] {
+                        continue;
+                    }
+                    let diff = (ipm.v[k][i] - v[k * NU + i]).abs();
+                    worst = worst.max(diff);
+                    assert!(
+                        diff < 1e-6,
+                        "case {case} (S {:?}, lead {:?}), stage {k}: {} vs {}",
+                        d.s,
+                        d.lead,
+                        ipm.v[k][i],
+                        v[k * NU + i]
+                    );
+                }
+            }
+        }
+        assert!(worst < 1e-6);
+    }
+
+    #[test]
+    fn a_heavy_rate_weight_holds_the_previous_input() {
+        // A = 0, B = 0 (nothing to track), ū = 0, u₋₁ = 0.3 inside the box: with S ≫ R the optimal
+        // plan stays near u₋₁; by hand, the stationarity of the tridiagonal system.
+        let mut d = random_data(&mut Lcg(8), 1.0);
+        d.a = [[[0.0; NX]; NX]; N];
+        d.b = [[[0.0; NU]; NX]; N];
+        d.us = [[0.0; NU]; N];
+        d.lo = [[-1.0; NU]; N];
+        d.hi = [[1.0; NU]; N];
+        d.u_prev = [0.3; NU];
+        d.s = [1e4; NU];
+        let mut ipm = RiccatiIpm::new();
+        assert_eq!(d.solve(&mut ipm).status, IpmStatus::Optimal);
+        for i in 0..NU {
+            for k in 0..N {
+                // (R + δ) vₖ + S (2vₖ − vₖ₋₁ − vₖ₊₁) = 0 inside (v₋₁ = u₋₁, last stage S (v − vₖ₋₁))
+                let before = if k == 0 { d.u_prev[i] } else { ipm.v[k - 1][i] };
+                let after = if k + 1 < N { ipm.v[k + 1][i] } else { ipm.v[k][i] };
+                let residual =
+                    (R[i] + REGULARISATION) * ipm.v[k][i] + d.s[i] * ((ipm.v[k][i] - before) - (after - ipm.v[k][i]));
+                assert!(residual.abs() < 1e-8, "stage {k}: residual {residual:e}");
+                assert!(ipm.v[k][i] > 0.2 && ipm.v[k][i] <= 0.3, "stage {k}: {}", ipm.v[k][i]);
+            }
+        }
+    }
+
+    #[test]
     fn iteration_cap_is_reported_with_a_finite_iterate() {
         let d = random_data(&mut Lcg(9), 0.05);
         let mut ipm = RiccatiIpm::new();
-        assert!(ipm.prepare(&d.a, &d.b, &d.lo, &d.hi));
+        assert!(ipm.prepare(&d.qp()));
         let r = ipm.solve(&d.qp(), &d.z0, 2);
         assert_eq!(
             r,
@@ -831,10 +1112,10 @@ mod tests {
         let mut d = random_data(&mut Lcg(3), 1.0);
         d.a[7][1][0] = Real::NAN;
         let mut ipm = RiccatiIpm::new();
-        assert!(!ipm.prepare(&d.a, &d.b, &d.lo, &d.hi));
+        assert!(!ipm.prepare(&d.qp()));
         d = random_data(&mut Lcg(3), 1.0);
         d.e[4][0] = Real::INFINITY;
-        assert!(ipm.prepare(&d.a, &d.b, &d.lo, &d.hi));
+        assert!(ipm.prepare(&d.qp()));
         assert_eq!(ipm.solve(&d.qp(), &d.z0, 30).status, IpmStatus::NumericalFailure);
     }
 }

@@ -38,8 +38,8 @@ pub const Q_TERMINAL: [Real; NX] = [
 ];
 /// Input weights diag(R).
 pub const R: [Real; NU] = [0.1, 0.1, 0.1, 10.0];
-/// Input-rate weights diag(S) on uₖ − uₖ₋₁, u₋₁ = the input applied before stage 0 (the condensed
-/// solver; the stage-wise one is generated only with S = 0).
+/// Input-rate weights diag(S) on uₖ − uₖ₋₁, u₋₁ = the input applied before stage 0 (both QP
+/// solvers; docs/mpc.md).
 pub const R_DELTA: [Real; NU] = [0.0, 50.0, 50.0, 0.0];
 /// Lower input bounds.
 pub const U_MIN: [Real; NU] = [-5.0, -0.611, -0.611, -2.6179938779914944];

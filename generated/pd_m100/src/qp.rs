@@ -8,7 +8,10 @@
 //!   min ½ vᵀ H v + gᵀ v   s.t.  lo ≤ v ≤ hi,   H = Hᵀ ≻ 0,  v ∈ ℝⁿ.
 //!
 //! The working set W holds the variables fixed at a bound, F the free ones.
-//! L is the Cholesky factor of H_FF (rows and columns in the order of `free`).
+//! L is the Cholesky factor of H_FF (rows and columns in the order of `free`), stored
+//! transposed (column j of L contiguous), so that the substitutions and the updates run over
+//! contiguous slices: the forward substitution by columns (elementwise updates, eight columns at
+//! a time), the backward one by rows of Lᵀ (eight at a time), the rotations along rows of Lᵀ.
 //! Each iteration solves the equality-constrained subproblem on F,
 //!
 //!   v_F* = −H_FF⁻¹ (g_F + H_FW v_W),
@@ -47,8 +50,9 @@ pub struct QpResult {
 /// Workspace of the active-set solver for `NV` variables (no allocation).
 #[derive(Clone, Debug)]
 pub struct BoxQp<const NV: usize> {
-    /// Cholesky factor of H_FF, lower triangle, `nf × nf` used.
-    l: [[Real; NV]; NV],
+    /// Cholesky factor of H_FF, stored transposed: `u[j][i]` = L_ij for j ≤ i (row j of `u` is
+    /// column j of L, so the substitutions and updates run over contiguous slices), `nf × nf` used.
+    u: [[Real; NV]; NV],
     /// Free variables in factor order.
     free: [usize; NV],
     nf: usize,
@@ -73,7 +77,9 @@ impl<const NV: usize> Default for BoxQp<NV> {
     }
 }
 /// Σ aᵢ bᵢ over the shorter length, with 8 independent partial sums so that the
-/// loop vectorises (the summation order is fixed, so results are deterministic).
+/// loop vectorises (the summation order is fixed, so results are deterministic). The last
+/// n mod 8 elements go in pairs into two of them (then one scalar), which keeps short products
+/// (the substitutions' rows) cheap.
 #[inline]
 pub fn dot(a: &[Real], b: &[Real]) -> Real {
     let n = a.len().min(b.len());
@@ -86,36 +92,210 @@ pub fn dot(a: &[Real], b: &[Real]) -> Real {
             acc[l] += x[l] * y[l];
         }
     }
+    let (pa, pb) = (ra.chunks_exact(2), rb.chunks_exact(2));
+    let (ta, tb) = (pa.remainder(), pb.remainder());
+    for (x, y) in pa.zip(pb) {
+        acc[0] += x[0] * y[0];
+        acc[1] += x[1] * y[1];
+    }
     let mut tail = 0.0;
-    for (x, y) in ra.iter().zip(rb) {
+    for (x, y) in ta.iter().zip(tb) {
         tail += x * y;
     }
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
         + tail
 }
-/// Four dot products of `a` with `b[0..4]` (all over a's length), sharing the
-/// loads of `a`; 4 lanes per product so the loop vectorises.
+/// w_k ← (((w_k − x₀ r₀_k) − x₁ r₁_k) − x₂ r₂_k) − x₃ r₃_k for every k (over the shortest
+/// length): four columns of a substitution at once, one load and store of w per four
+/// multiply-adds. Elementwise, two elements per iteration, so that it vectorises on x86-64 (SSE2)
+/// without reassociating anything.
 #[inline]
-fn dot4(a: &[Real], b: [&[Real]; 4]) -> [Real; 4] {
-    let mut acc = [[0.0 as Real; 4]; 4];
-    let mut out = [0.0 as Real; 4];
-    let chunks_a = a.chunks_exact(4);
-    let tail_a = chunks_a.remainder();
-    for (c, bc) in b.iter().enumerate() {
-        let chunks_b = bc.chunks_exact(4);
-        let tail_b = chunks_b.remainder();
-        for (x, y) in a.chunks_exact(4).zip(chunks_b) {
-            for l in 0..4 {
-                acc[c][l] += x[l] * y[l];
+fn axpy4(w: &mut [Real], x: [Real; 4], r: [&[Real]; 4]) {
+    let n = w.len().min(r[0].len()).min(r[1].len()).min(r[2].len()).min(r[3].len());
+    let (w, r0, r1, r2, r3) = (
+        &mut w[..n],
+        &r[0][..n],
+        &r[1][..n],
+        &r[2][..n],
+        &r[3][..n],
+    );
+    let rows = r0
+        .chunks_exact(2)
+        .zip(r1.chunks_exact(2))
+        .zip(r2.chunks_exact(2))
+        .zip(r3.chunks_exact(2));
+    for (wk, (((a, b), c), d)) in w.chunks_exact_mut(2).zip(rows) {
+        for l in 0..2 {
+            wk[l] = (((wk[l] - x[0] * a[l]) - x[1] * b[l]) - x[2] * c[l]) - x[3] * d[l];
+        }
+    }
+    if n % 2 == 1 {
+        let k = n - 1;
+        w[k] = (((w[k] - x[0] * r0[k]) - x[1] * r1[k]) - x[2] * r2[k]) - x[3] * r3[k];
+    }
+}
+/// w_k ← w_k − x₀ r₀_k − … − x₇ r₇_k (subtracted in that order) for every k: eight columns
+/// of a substitution at once (one load and store of w per eight multiply-adds). Elementwise, so
+/// the loop vectorises without reassociating anything.
+#[inline]
+fn axpy8(w: &mut [Real], x: &[Real; 8], r: [&[Real]; 8]) {
+    let mut n = w.len();
+    for row in r {
+        n = n.min(row.len());
+    }
+    let w = &mut w[..n];
+    let [r0, r1, r2, r3, r4, r5, r6, r7] = r;
+    let (r0, r1, r2, r3, r4, r5, r6, r7) = (
+        &r0[..n],
+        &r1[..n],
+        &r2[..n],
+        &r3[..n],
+        &r4[..n],
+        &r5[..n],
+        &r6[..n],
+        &r7[..n],
+    );
+    for k in 0..n {
+        let a = ((w[k] - x[0] * r0[k]) - x[1] * r1[k]) - x[2] * r2[k];
+        let b = ((a - x[3] * r3[k]) - x[4] * r4[k]) - x[5] * r5[k];
+        w[k] = (b - x[6] * r6[k]) - x[7] * r7[k];
+    }
+}
+/// w_k −= x r_k for every k (over the shorter length).
+#[inline]
+fn axpy(w: &mut [Real], x: Real, r: &[Real]) {
+    for (wk, rk) in w.iter_mut().zip(r) {
+        *wk -= x * rk;
+    }
+}
+/// Forward substitution with L by columns (column j of L is row j of `u`): for j in
+/// `start..stop`, w_j ← w_j / L_jj, then w_k −= w_j L_kj for k in j + 1..`end` (end ≥ stop;
+/// the rows of L from `stop` on only receive the updates). Eight columns at a time (then four,
+/// then one); a block of eight exact zeros (another component's columns) is skipped.
+fn forward<const NV: usize>(
+    u: &[[Real; NV]; NV],
+    w: &mut [Real; NV],
+    start: usize,
+    stop: usize,
+    end: usize,
+) {
+    let end = end.min(NV);
+    let stop = stop.min(end);
+    let mut j = start;
+    while j + 8 <= stop {
+        let Some(rows) = u.get(j..j + 8) else {
+            break;
+        };
+        let mut x = [0.0 as Real; 8];
+        for c in 0..8 {
+            let jc = (j + c).min(NV - 1);
+            let mut s = w[jc];
+            for (xc2, row) in x.iter().zip(rows).take(c) {
+                s -= xc2 * row[jc];
+            }
+            let pivot = rows.get(c).map_or(1.0, |row| row[jc]);
+            x[c] = s / pivot;
+            w[jc] = x[c];
+        }
+        if x.iter().any(|&xc| xc != 0.0) {
+            let lo = (j + 8).min(end);
+            let r = core::array::from_fn(|c| {
+                rows.get(c).map_or(&[][..], |row| &row[lo..end])
+            });
+            axpy8(&mut w[lo..end], &x, r);
+        }
+        j += 8;
+    }
+    while j + 4 <= stop {
+        let (Some([r0, r1, r2, r3]), Some(wj)) = (u.get(j..j + 4), w.get_mut(j..j + 4))
+        else {
+            break;
+        };
+        let x0 = wj[0] / r0[j];
+        let x1 = (wj[1] - x0 * r0[j + 1]) / r1[j + 1];
+        let x2 = ((wj[2] - x0 * r0[j + 2]) - x1 * r1[j + 2]) / r2[j + 2];
+        let x3 = (((wj[3] - x0 * r0[j + 3]) - x1 * r1[j + 3]) - x2 * r2[j + 3])
+            / r3[j + 3];
+        wj.copy_from_slice(&[x0, x1, x2, x3]);
+        let lo = j + 4;
+        axpy4(
+            &mut w[lo..end],
+            [x0, x1, x2, x3],
+            [&r0[lo..end], &r1[lo..end], &r2[lo..end], &r3[lo..end]],
+        );
+        j += 4;
+    }
+    while j < stop {
+        let r = &u[j % NV];
+        let x = w[j % NV] / r[j % NV];
+        w[j % NV] = x;
+        let lo = (j + 1).min(end);
+        axpy(&mut w[lo..end], x, &r[lo..end]);
+        j += 1;
+    }
+}
+/// Σ_{c<8} r_c x_c, in pairs (vectorises on SSE2).
+#[inline]
+fn dot8(r: &[Real; 8], x: &[Real; 8]) -> Real {
+    ((r[0] * x[0] + r[4] * x[4]) + (r[1] * x[1] + r[5] * x[5]))
+        + ((r[2] * x[2] + r[6] * x[6]) + (r[3] * x[3] + r[7] * x[7]))
+}
+/// Backward substitution Lᵀ x = y in place on `y[..nf]` (Lᵀ = `u`, upper triangular, by rows),
+/// eight rows at a time from the bottom: solve the 8 × 8 diagonal block, then subtract its
+/// contribution from every row above it (eight contiguous entries of each: fixed-length products,
+/// no per-row loop overhead). `start[k]`: L's row k is zero before it, so the rows above
+/// min(start) of a block have no entries in its columns.
+fn backward<const NV: usize>(
+    u: &[[Real; NV]; NV],
+    y: &mut [Real; NV],
+    nf: usize,
+    start: &[usize; NV],
+) {
+    let mut hi = nf.min(NV);
+    while hi >= 8 {
+        let lo = hi - 8;
+        for i in (lo..hi).rev() {
+            triangle_row(u, y, i, hi);
+        }
+        let (Some(yb), Some(sb)) = (y.get(lo..hi), start.get(lo..hi)) else {
+            break;
+        };
+        let Ok(xb) = <[Real; 8]>::try_from(yb) else {
+            break;
+        };
+        let top = sb.iter().fold(lo, |m, &s| m.min(s));
+        if let (Some(rows), Some(ys)) = (u.get(top..lo), y.get_mut(top..lo)) {
+            for (row, yi) in rows.iter().zip(ys) {
+                if let Some(Ok(r)) = row.get(lo..hi).map(<&[Real; 8]>::try_from) {
+                    *yi -= dot8(r, &xb);
+                }
             }
         }
-        let mut t = (acc[c][0] + acc[c][2]) + (acc[c][1] + acc[c][3]);
-        for (x, y) in tail_a.iter().zip(tail_b) {
-            t += x * y;
-        }
-        out[c] = t;
+        hi = lo;
     }
-    out
+    for i in (0..hi).rev() {
+        triangle_row(u, y, i, hi);
+    }
+}
+/// y_i ← (y_i − Σ_{k in i+1..hi} u_ik y_k) / u_ii (one row of a backward substitution).
+#[inline]
+fn triangle_row<const NV: usize>(
+    u: &[[Real; NV]; NV],
+    y: &mut [Real; NV],
+    i: usize,
+    hi: usize,
+) {
+    let (Some(row), Some(&yi)) = (u.get(i), y.get(i)) else {
+        return;
+    };
+    let mut s = yi;
+    let (r, yk) = (row.get(i + 1..hi).unwrap_or(&[]), y.get(i + 1..hi).unwrap_or(&[]));
+    for (r, yk) in r.iter().zip(yk) {
+        s -= r * yk;
+    }
+    if let (Some(yi), Some(&pivot)) = (y.get_mut(i), row.get(i)) {
+        *yi = s / pivot;
+    }
 }
 /// Violated bounds that trigger a projection restart.
 const RESTART_VIOLATIONS: usize = 2;
@@ -123,9 +303,10 @@ const RESTART_VIOLATIONS: usize = 2;
 const MAX_RESTARTS: usize = 30;
 /// Variables freed per iteration at most (those with the most negative multipliers): freeing
 /// every one at once after a reference jump mostly frees variables that the next projection
-/// restart fixes again, each at the cost of a row of the factor. 6 gave the smallest slowest step
-/// of 6, 8 and unbounded on the shipped models (docs/benchmarks.md).
-const RELEASE_CAP: usize = 6;
+/// restart fixes again, each at the cost of a row of the factor. With the vectorised kernels
+/// (cheaper rows, cheaper iterations) 16 gave the smallest slowest step of 4, 6, 10 and 16 on the
+/// shipped models (docs/benchmarks.md; 6 before them).
+const RELEASE_CAP: usize = 16;
 /// A fresh factorisation orders the free variables last stage first.
 const REVERSED_ORDER: bool = true;
 /// Relative pivot tolerance of the factorisation.
@@ -161,7 +342,7 @@ impl<const NV: usize> BoxQp<NV> {
             i += 1;
         }
         Self {
-            l: [[0.0; NV]; NV],
+            u: [[0.0; NV]; NV],
             free: [0; NV],
             nf: 0,
             state: [Bound::Free; NV],
@@ -259,6 +440,12 @@ impl<const NV: usize> BoxQp<NV> {
         self.factor_rows(h, first)
     }
     /// Rows `from..nf` of the Cholesky factor of H_FF, rows before `from` given.
+    ///
+    /// Row i of L is the forward substitution L₁₁ x = H_{F(..i), F(i)} in column form (column j
+    /// of L is row j of `u`, contiguous): w ← H's column of i; for each j, x_j = w_j / L_jj and
+    /// w_k −= x_j L_kj for k > j, eight columns j at a time. The updates of w are elementwise
+    /// multiply-subtracts over contiguous slices, which vectorise on x86-64 and need no
+    /// reassociation (the order of the terms of each w_k is fixed).
     fn factor_rows(
         &mut self,
         h: &[[Real; NV]; NV],
@@ -276,6 +463,7 @@ impl<const NV: usize> BoxQp<NV> {
                 first[usize::from(group[var(i)]) % NV] = i;
             }
         }
+        let w = &mut self.work;
         for i in from..nf {
             if i >= NV {
                 break;
@@ -283,109 +471,84 @@ impl<const NV: usize> BoxQp<NV> {
             let hi = &h[var(i)];
             let gi = group[var(i)];
             let start = first[usize::from(gi) % NV].min(i);
-            for x in self.l[i][..start].iter_mut() {
-                *x = 0.0;
+            for (wk, &v) in w[start..i].iter_mut().zip(&free[start..i]) {
+                *wk = hi[v.min(NV - 1)];
             }
-            let mut j = start;
-            while j + 4 <= i {
-                let (head, tail) = self.l.split_at_mut(i);
-                let (Some(li), Some(rows)) = (tail.first_mut(), head.get(j..j + 4)) else {
-                    break;
-                };
-                let n = j.min(NV);
-                let m = start.min(n);
-                let d = dot4(
-                    &li[m..n],
-                    [&rows[0][m..n], &rows[1][m..n], &rows[2][m..n], &rows[3][m..n]],
-                );
-                for c in 0..4 {
-                    let lj = &rows[c];
-                    let mut s = hi[var(j + c)] - d[c];
-                    for k in j..j + c {
-                        if let (Some(a), Some(b)) = (li.get(k), lj.get(k)) {
-                            s -= a * b;
-                        }
-                    }
-                    let pivot = lj.get(j + c).copied().unwrap_or(1.0);
-                    if let Some(x) = li.get_mut(j + c) {
-                        *x = s / pivot;
-                    }
-                }
-                j += 4;
+            forward(&self.u, w, start, i, i);
+            let s = hi[var(i)] - dot(&w[start..i], &w[start..i]);
+            if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
+                return Err(QpStatus::NotPositiveDefinite);
             }
-            for j in j..=i {
-                if grouped && group[var(j)] != gi {
-                    self.l[i][j] = 0.0;
-                    continue;
-                }
-                let m = start.min(j);
-                let s = hi[var(j)] - dot(&self.l[i][m..j], &self.l[j][m..j]);
-                if j < i {
-                    self.l[i][j] = s / self.l[j][j];
-                } else {
-                    if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
-                        return Err(QpStatus::NotPositiveDefinite);
-                    }
-                    self.l[i][i] = sqrt(s);
-                }
+            for (row, &x) in self.u.iter_mut().zip(&w[..i]).skip(start) {
+                row[i] = x;
             }
+            for row in self.u[..start].iter_mut() {
+                row[i] = 0.0;
+            }
+            self.u[i][i] = sqrt(s);
         }
         Ok(())
     }
-    /// For each free position i, the first position of its component: L[i][..start[i]] is
-    /// exactly zero (`with_groups`), so the substitutions skip it.
-    /// `None` for a single component (every start is 0).
-    fn row_starts(&self) -> Option<[usize; NV]> {
+    /// Solve L Lᵀ y = b in place on `rhs[..nf]`: forward substitution by columns (four at a
+    /// time, as in [`Self::factor_rows`]), backward by rows of Lᵀ (dot products).
+    fn solve_factored(&mut self) {
         let nf = self.free_count();
+        let start = self.row_starts();
+        let y = &mut self.rhs;
+        forward(&self.u, y, 0, nf, nf);
+        backward(&self.u, y, nf, &start);
+    }
+    /// For each free position i, the first position of its component (0 for one component):
+    /// L[i][..start[i]] is exactly zero (`with_groups`).
+    fn row_starts(&self) -> [usize; NV] {
+        let nf = self.free_count();
+        let mut start = [0; NV];
         if self.groups <= 1 {
-            return None;
+            return start;
         }
         let mut first = [nf; NV];
         for i in (0..nf).rev() {
             first[usize::from(self.group[self.var(i)]) % NV] = i;
         }
-        let mut start = [0; NV];
         for i in 0..nf {
             start[i] = first[usize::from(self.group[self.var(i)]) % NV].min(i);
         }
-        Some(start)
-    }
-    /// Solve L Lᵀ y = b in place on `rhs[..nf]` (forward then backward substitution).
-    fn solve_factored(&mut self) {
-        let nf = self.free_count();
-        let start = self.row_starts();
-        for i in 0..nf {
-            let row = &self.l[i];
-            let s = start.as_ref().map_or(0, |st| st[i]).min(i);
-            self.rhs[i] = (self.rhs[i] - dot(&row[s..i], &self.rhs[s..i])) / row[i];
-        }
-        for i in (0..nf).rev() {
-            let xi = self.rhs[i] / self.l[i][i];
-            self.rhs[i] = xi;
-            let row = &self.l[i];
-            for k in start.as_ref().map_or(0, |st| st[i])..i {
-                self.rhs[k] -= row[k] * xi;
-            }
-        }
+        start
     }
     /// Remove free position `p` from the factor. With L = [L11 0 0; l21ᵀ l22 0; L31 l32 L33],
     /// the factor of H_FF without p is [L11 0; L31 L33'] with L33' L33'ᵀ = L33 L33ᵀ + l32 l32ᵀ
-    /// (a rank-one update by rotations).
+    /// (a rank-one update by rotations, applied along the rows of U = Lᵀ).
     fn remove(&mut self, p: usize) {
         let nf = self.free_count();
         if p >= nf {
             return;
         }
-        for i in p + 1..nf {
-            self.target[i - 1] = self.l[i][p];
-            for k in 0..p {
-                self.l[i - 1][k] = self.l[i][k];
+        if let (Some(t), Some(x)) = (
+            self.target.get_mut(p..nf - 1),
+            self.u[p % NV].get(p + 1..nf),
+        ) {
+            for (t, x) in t.iter_mut().zip(x) {
+                *t = *x;
             }
-            for k in p + 1..NV {
-                if k > i {
-                    break;
+        }
+        for row in self.u.iter_mut().take(p) {
+            if let Some(seg) = row.get_mut(p..nf) {
+                if seg.len() > 1 {
+                    seg.copy_within(1.., 0);
                 }
-                self.l[i - 1][k - 1] = self.l[i][k];
+            }
+        }
+        for k in p + 1..nf {
+            let (head, tail) = self.u.split_at_mut(k.min(NV));
+            if let (Some(dst), Some(src)) = (head.last_mut(), tail.first()) {
+                for (d, s) in dst
+                    .iter_mut()
+                    .skip(k - 1)
+                    .zip(src.iter().skip(k))
+                    .take(nf - k)
+                {
+                    *d = *s;
+                }
             }
         }
         for i in p..nf - 1 {
@@ -394,15 +557,21 @@ impl<const NV: usize> BoxQp<NV> {
         self.nf -= 1;
         let nf = self.free_count();
         for k in p..nf {
-            let lkk = self.l[k][k];
-            let xk = self.target[k];
+            let row = &mut self.u[k % NV];
+            let lkk = row[k % NV];
+            let xk = self.target[k % NV];
             let r = sqrt(lkk * lkk + xk * xk);
             let (c, s) = (r / lkk, xk / lkk);
-            self.l[k][k] = r;
-            for i in k + 1..nf {
-                let lik = (self.l[i][k] + s * self.target[i]) / c;
-                self.target[i] = c * self.target[i] - s * lik;
-                self.l[i][k] = lik;
+            row[k % NV] = r;
+            if let (Some(l), Some(t)) = (
+                row.get_mut(k + 1..nf),
+                self.target.get_mut(k + 1..nf),
+            ) {
+                for (l, t) in l.iter_mut().zip(t.iter_mut()) {
+                    let lik = (*l + s * *t) / c;
+                    *t = c * *t - s * lik;
+                    *l = lik;
+                }
             }
         }
     }
@@ -489,14 +658,12 @@ impl<const NV: usize> BoxQp<NV> {
     /// ‖Lᵀ z‖² for z = target[..nf] (factor order).
     fn factor_norm(&mut self) -> Real {
         let nf = self.free_count();
-        self.work[..nf].fill(0.0);
-        for i in 0..nf {
-            let zi = self.target[i];
-            for (w, l) in self.work[..i + 1].iter_mut().zip(&self.l[i][..i + 1]) {
-                *w += l * zi;
-            }
+        let mut sum = 0.0;
+        for j in 0..nf {
+            let y = dot(&self.u[j][j..nf], &self.target[j..nf]);
+            sum += y * y;
         }
-        dot(&self.work[..nf], &self.work[..nf])
+        sum
     }
     /// At a step of length 0: every free variable that sits at a bound while the direction
     /// `rhs − v` leaves the box there blocks. Fix all of them at once (objective and iterate
@@ -553,6 +720,24 @@ impl<const NV: usize> BoxQp<NV> {
             }
         }
         true
+    }
+    /// `work` = H v = H_{·W} v_W (`fixed_gradient`) + Σ_{k∈F} v_k H_{·k} (H is symmetric: rows of
+    /// H, four at a time).
+    fn hv_by_free_rows(&mut self, h: &[[Real; NV]; NV], v: &[Real; NV]) {
+        self.work = self.fixed_gradient;
+        let nf = self.free_count();
+        let mut i = 0;
+        while i + 4 <= nf {
+            let vars = [self.var(i), self.var(i + 1), self.var(i + 2), self.var(i + 3)];
+            let x = vars.map(|var| -v[var]);
+            axpy4(&mut self.work, x, vars.map(|var| &h[var][..]));
+            i += 4;
+        }
+        while i < nf {
+            let var = self.var(i);
+            axpy(&mut self.work, -v[var], &h[var]);
+            i += 1;
+        }
     }
     /// `fixed_gradient` += H_{·,var} value (H is symmetric: its row `var`).
     fn add_fixed(&mut self, h: &[[Real; NV]; NV], var: usize, value: Real) {
@@ -653,6 +838,10 @@ impl<const NV: usize> BoxQp<NV> {
                 self.remove(p);
                 continue;
             }
+            let by_free_rows = self.free_count() < NV - self.free_count();
+            if by_free_rows {
+                self.hv_by_free_rows(h, v);
+            }
             let mut chosen = [(0.0 as Real, NV); RELEASE_CAP];
             for j in 0..NV {
                 let sign = match self.state[j] {
@@ -660,7 +849,8 @@ impl<const NV: usize> BoxQp<NV> {
                     Bound::Lower => 1.0,
                     Bound::Upper => -1.0,
                 };
-                let mut entry = (sign * (g[j] + dot(&h[j], &v[..])), j);
+                let hv = if by_free_rows { self.work[j] } else { dot(&h[j], &v[..]) };
+                let mut entry = (sign * (g[j] + hv), j);
                 if !(entry.0 < -tolerance) {
                     continue;
                 }

@@ -70,23 +70,26 @@ impl QpMethod {
 }
 
 impl QpChoice {
-    /// The solver for a problem of `nx` states, `nu` inputs and horizon `n`. `Auto` compares the
-    /// flops of a typical step's QP work (docs/mpc.md, "Choosing the QP solver"): condensed,
-    /// condensing N²/2·NU·NX² plus the Cholesky of the N·NU Hessian (N·NU)³/6 multiply-adds;
-    /// riccati, `RICCATI_ITERATIONS` Riccati factorisations of N·(2 NX³ + 3 NX² NU) each. The
-    /// cheaper one is chosen (the condensed one on a tie).
-    pub fn resolve(self, nx: usize, nu: usize, n: usize) -> QpMethod {
-        self.resolve_for(&kernels::Structure::dense(nx, nu), n)
+    /// The solver for a problem of `nx` states, `nu` inputs (`rate_inputs` of them with an
+    /// input-rate weight) and horizon `n`. `Auto` compares the flops of a typical step's QP work
+    /// (docs/mpc.md, "Choosing the QP solver"): condensed, condensing N²/2·NU·NX² plus the
+    /// Cholesky of the N·NU Hessian (N·NU)³/6 multiply-adds (the rate term only adds to H's
+    /// diagonal and first off-diagonal blocks: O(N·NU), not counted); riccati,
+    /// `RICCATI_ITERATIONS` Riccati factorisations of N·(2 NX³ + 3 NX² NU) each, plus
+    /// N·rate_inputs·(NX² + NX·NU + NU²) for the rate term's blocks. The cheaper one is chosen (the
+    /// condensed one on a tie).
+    pub fn resolve(self, nx: usize, nu: usize, rate_inputs: usize, n: usize) -> QpMethod {
+        self.resolve_for(&kernels::Structure::dense(nx, nu), rate_inputs, n)
     }
 
     /// [`Self::resolve`] with the condensed solver's cost counted on the emitted kernels of a
     /// model's structure ([`structured_qp_flops`]).
-    pub fn resolve_for(self, structure: &kernels::Structure, n: usize) -> QpMethod {
+    pub fn resolve_for(self, structure: &kernels::Structure, rate_inputs: usize, n: usize) -> QpMethod {
         match self {
             QpChoice::Condensed => QpMethod::Condensed,
             QpChoice::Riccati => QpMethod::Riccati,
             QpChoice::Auto => {
-                let (condensed, riccati) = structured_qp_flops(structure, n);
+                let (condensed, riccati) = structured_qp_flops(structure, rate_inputs, n);
                 if riccati < condensed {
                     QpMethod::Riccati
                 } else {
@@ -97,12 +100,16 @@ impl QpChoice {
     }
 }
 
-/// Multiply-adds of a typical step's QP work, (condensed, riccati), for the `--qp auto` rule.
-pub fn qp_flops(nx: usize, nu: usize, n: usize) -> (f64, f64) {
-    let (nx, nu, n) = (nx as f64, nu as f64, n as f64);
+/// Multiply-adds of a typical step's QP work, (condensed, riccati), for the `--qp auto` rule
+/// ([`QpChoice::resolve`]); `rate_inputs` inputs have an input-rate weight.
+pub fn qp_flops(nx: usize, nu: usize, rate_inputs: usize, n: usize) -> (f64, f64) {
+    let (nx, nu, nr, n) = (nx as f64, nu as f64, rate_inputs as f64, n as f64);
     let nv = n * nu;
     let condensed = n * n / 2.0 * nu * nx * nx + nv * nv * nv / 6.0;
-    let riccati = RICCATI_ITERATIONS * n * (2.0 * nx * nx * nx + 3.0 * nx * nx * nu);
+    // The rate term's blocks per stage and rate-weighted input: a row of Pwx A and of Pwx B, a
+    // solve with the stage factor for Pww.
+    let rate = nr * (nx * nx + nx * nu + nu * nu);
+    let riccati = RICCATI_ITERATIONS * n * (2.0 * nx * nx * nx + 3.0 * nx * nx * nu + rate);
     (condensed, riccati)
 }
 
@@ -111,8 +118,8 @@ pub fn qp_flops(nx: usize, nu: usize, n: usize) -> (f64, f64) {
 /// components ([`kernels::Structure::flops`]). Riccati: the dense formula (its kernels are not
 /// specialised). With no structural zeros this is [`qp_flops`] up to the condensing's lower-order
 /// terms.
-pub fn structured_qp_flops(structure: &kernels::Structure, n: usize) -> (f64, f64) {
-    let (_, riccati) = qp_flops(structure.nx, structure.nu, n);
+pub fn structured_qp_flops(structure: &kernels::Structure, rate_inputs: usize, n: usize) -> (f64, f64) {
+    let (_, riccati) = qp_flops(structure.nx, structure.nu, rate_inputs, n);
     let f = structure.flops(n);
     ((f.condensing + f.cholesky) as f64, riccati)
 }
@@ -279,20 +286,10 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         }
     }
     let structure = kernels::Structure::from_ir(&ir, substeps, &mpc.q, &mpc.q_terminal);
-    // The stage-wise solver has no input-rate term (it would need the previous input as a state):
-    // `auto` takes the condensed one when the options have one, `riccati` refuses them.
-    let has_rate = mpc.r_delta.iter().any(|&s| s != 0.0);
-    let qp = match options.qp {
-        QpChoice::Auto if has_rate => QpMethod::Condensed,
-        QpChoice::Riccati if has_rate => {
-            return Err(invalid(
-                "qp",
-                "the riccati solver has no input-rate term: give \"r_delta\" all 0 in the --mpc options file \
-                 (the default is 50 on u_roll and u_pitch) or use --qp condensed (docs/mpc.md)",
-            ))
-        }
-        choice => choice.resolve_for(&structure, options.horizon),
-    };
+    // Both solvers carry the input-rate term (the stage-wise one with the previous input step as
+    // a state); `auto` counts its cost for the inputs that have one.
+    let rate_inputs = mpc.r_delta.iter().filter(|&&s| s != 0.0).count();
+    let qp = options.qp.resolve_for(&structure, rate_inputs, options.horizon);
     let head = header::lines(model, options, substeps, &mpc, qp);
     let rs_header = header::rust(&head);
 
@@ -374,4 +371,28 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         structure,
         sensitivity_flops,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn auto_counts_the_rate_term_and_picks_by_flops() {
+        // N = 30, NX = 12, NU = 4 (the shipped sizes): condensed 0.55 M multiply-adds without
+        // structural zeros against riccati 10 × 30 × (3456 + 1728) = 1.56 M, + 0.12 M for two
+        // rate-weighted inputs; N = 100: the condensed work is cubic in N (13.5 M by this formula),
+        // the stage-wise one linear (5.2 M, 5.6 M with the rate term).
+        let (condensed, riccati) = qp_flops(12, 4, 0, 30);
+        let (_, with_rate) = qp_flops(12, 4, 2, 30);
+        assert_eq!(condensed, 30.0 * 30.0 / 2.0 * 4.0 * 144.0 + 120.0f64.powi(3) / 6.0);
+        assert_eq!(riccati, 10.0 * 30.0 * (2.0 * 1728.0 + 3.0 * 144.0 * 4.0));
+        assert_eq!(with_rate - riccati, 10.0 * 30.0 * 2.0 * (144.0 + 48.0 + 16.0));
+        assert_eq!(QpChoice::Auto.resolve(12, 4, 2, 30), QpMethod::Condensed);
+        assert_eq!(QpChoice::Auto.resolve(12, 4, 2, 100), QpMethod::Riccati);
+        assert_eq!(QpChoice::Auto.resolve(12, 4, 0, 100), QpMethod::Riccati);
+        // An explicit choice is kept whatever the rate weights.
+        assert_eq!(QpChoice::Riccati.resolve(12, 4, 4, 30), QpMethod::Riccati);
+        assert_eq!(QpChoice::Condensed.resolve(12, 4, 0, 100), QpMethod::Condensed);
+    }
 }
