@@ -436,7 +436,7 @@ fn check(args: CheckArgs) -> Result<(), String> {
     println!(
         "  multiply-adds per RTI step without the QP's iterations (linearisation + condensing + feedback + Cholesky): \
          {} (without the structural specialisation {})",
-        lin + after.total(),
+        uavgen::bench::StepWork::of(&generated, options.horizon).total(),
         lin_dense + dense.total()
     );
     Ok(())
@@ -464,12 +464,8 @@ fn print_work(
     let gflops = flops / timing.prepare_ns[0];
     let fraction = peak_gflops.map(|p| gflops / p);
     let mut line = format!("  prepare: {gflops:.2} GFlop/s at its median time");
-    if let Some(f) = fraction {
-        line += &format!(
-            " ({:.1} % of the {:.1} GFlop/s peak given)",
-            100.0 * f,
-            peak_gflops.unwrap_or(0.0)
-        );
+    if let (Some(f), Some(p)) = (fraction, peak_gflops) {
+        line += &format!(" ({:.1} % of the {p:.1} GFlop/s peak given)", 100.0 * f);
     }
     if let Some(r) = per_instruction {
         line += &format!(", {r:.2} flops per instruction at its median instruction count");

@@ -25,6 +25,22 @@ pub struct StepWork {
 }
 
 impl StepWork {
+    /// The work of a generated condensed crate at horizon `n` (what `uavgen check` prints).
+    pub fn of(generated: &crate::GeneratedCrate, n: usize) -> Self {
+        let flops = generated.structure.flops(n);
+        Self {
+            linearisation: generated.sensitivity_flops.per_step(n, generated.substeps).0,
+            condensing: flops.condensing,
+            cholesky: flops.cholesky,
+            feedback: flops.feedback,
+        }
+    }
+
+    /// Multiply-adds of the whole step without QP iterations.
+    pub fn total(&self) -> usize {
+        self.prepare() + self.feedback
+    }
+
     /// Multiply-adds of `prepare`.
     pub fn prepare(&self) -> usize {
         self.linearisation + self.condensing + self.cholesky
@@ -37,7 +53,7 @@ impl StepWork {
 
     /// Flops of the whole step without QP iterations.
     pub fn total_flops(&self) -> usize {
-        2 * (self.prepare() + self.feedback)
+        2 * self.total()
     }
 }
 
@@ -85,14 +101,7 @@ pub fn step_work(model: &Model, crate_dir: &Path, dims: &CrateDims) -> Result<Op
         ..GenerateOptions::default()
     };
     let generated = crate::generate(model, &options).map_err(|e| format!("{}: {e}", model.source.file))?;
-    let flops = generated.structure.flops(dims.horizon);
-    let (linearisation, _) = generated.sensitivity_flops.per_step(dims.horizon, generated.substeps);
-    Ok(Some(StepWork {
-        linearisation,
-        condensing: flops.condensing,
-        cholesky: flops.cholesky,
-        feedback: flops.feedback,
-    }))
+    Ok(Some(StepWork::of(&generated, dims.horizon)))
 }
 
 #[cfg(test)]

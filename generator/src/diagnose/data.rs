@@ -44,7 +44,7 @@ pub(crate) struct SegData {
     /// RK4 substeps per sample of the base model.
     pub substeps: usize,
     /// Per interior sample: no row of its derivative window is on the ground (see
-    /// [`GROUND_CLEARANCE`]); the others are left out of every fit and score.
+    /// [`crate::logs::GROUND_CLEARANCE`]); the others are left out of every fit and score.
     pub airborne: Vec<bool>,
     /// How `r` compares model and data (the kernel is the identity for `Pointwise`).
     pub residual: ResidualKind,
@@ -60,8 +60,6 @@ impl SegData {
         self.h..self.len() - self.h
     }
 }
-
-pub use crate::logs::GROUND_CLEARANCE;
 
 /// The raw data and, if any row is stale, the copy with stale rows interpolated.
 pub(crate) struct Prepared {
@@ -173,8 +171,10 @@ fn build(
         }
     };
     let t0 = rows.t[0];
-    let ground: Vec<bool> = x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
-    let airborne = (h..n - h).map(|k| !ground[k - h..=k + h].iter().any(|g| *g)).collect();
+    let ground = crate::logs::on_ground(&x);
+    let airborne = (h..n - h)
+        .map(|k| !crate::logs::run_touches_ground(&ground, k - h, 2 * h))
+        .collect();
     Ok(SegData {
         log: rows.log,
         holdout: rows.holdout,

@@ -14,9 +14,9 @@
 //! ([`super::candidate`]). Runs use the parameters of each test fit (cross-validation: each fold's
 //! named linear parameters; the scanned delays and lags of the fit on all training data).
 
-use super::data::GROUND_CLEARANCE;
 use super::problem::{HorizonErrors, Problem, State};
 use super::shrink::{run, wrapped};
+use crate::logs::{on_ground, run_touches_ground};
 
 /// A run starts at every STRIDE-th held-out sample.
 pub(crate) const STRIDE: usize = 3;
@@ -39,9 +39,9 @@ pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], s
     for &s in segs {
         let seg = &data[s];
         let seen = aug.seen_inputs(seg);
-        let ground: Vec<bool> = seg.x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
+        let ground = on_ground(&seg.x);
         for k in (0..seg.len().saturating_sub(horizon)).step_by(stride.max(1)) {
-            if ground[k..=k + horizon].iter().any(|g| *g) {
+            if run_touches_ground(&ground, k, horizon) {
                 continue;
             }
             out.runs += 1;

@@ -309,7 +309,7 @@ pub fn effect_report(c: &Candidate, round: usize, selected: bool, rotor_radius: 
                         input: lag_channel_name(s.input),
                         value: s.value,
                         one_step: s.one_step,
-                        cross_correlation: s.one_step.and(s.seed),
+                        cross_correlation: s.seed,
                         sigma: s.sigma,
                         z: s.z,
                         kept: s.kept,

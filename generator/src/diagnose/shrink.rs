@@ -5,10 +5,11 @@
 
 use super::augmented::Augmented;
 use super::catalogue::CHANNELS;
-use super::data::{SegData, GROUND_CLEARANCE};
+use super::data::SegData;
 use super::problem::{Problem, State};
 use super::residuals::{filter, ResidualKind};
 use crate::evaluate::{wrap_angle, DIVERGENCE_BOUND};
+use crate::logs::{on_ground, run_touches_ground};
 use crate::logs::{STATE_COLUMNS, YAW};
 use crate::metrics::{compare, Metrics};
 use serde::Serialize;
@@ -140,9 +141,9 @@ impl Pool {
         }
         let seen = aug.seen_inputs(seg);
         let n = seg.len();
-        let ground: Vec<bool> = seg.x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
+        let ground = on_ground(&seg.x);
         for k in 0..n.saturating_sub(horizon) {
-            if ground[k..=k + horizon].iter().any(|g| *g) {
+            if run_touches_ground(&ground, k, horizon) {
                 continue;
             }
             self.runs += 1;

@@ -24,7 +24,7 @@ pub use plot::{plot_states, write_svg, PlotKind};
 use crate::discretize::{auto_substeps, discrete_step, Envelope, SubstepError};
 use crate::identify::dataset::{build, DatasetError, DatasetOptions};
 use crate::ir::ModelIr;
-use crate::logs::{median, FlightLog, Segment, StalePolicy, GROUND_CLEARANCE, YAW};
+use crate::logs::{median, on_ground, run_touches_ground, FlightLog, Segment, StalePolicy, YAW};
 use crate::metrics::{compare, Metrics, MetricsError};
 use crate::model::Model;
 use inputs::{logged, ModelInputs};
@@ -552,10 +552,10 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
             }
             // 2. Horizon free runs from every sample with a full horizon after it, clear of the
             //    ground (diagnose's rule).
-            let ground: Vec<bool> = seg.x.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect();
+            let ground = on_ground(&seg.x);
             let (mut runs, mut diverged, mut first_diverged) = (0, 0, None);
             for k in 0..n.saturating_sub(h) {
-                if ground[k..=k + h].iter().any(|g| *g) {
+                if run_touches_ground(&ground, k, h) {
                     acc.horizon_on_ground += 1;
                     continue;
                 }

@@ -34,6 +34,16 @@ pub const YAW: usize = 5;
 /// `diagnose` leave out the horizon free runs that touch them, alike.
 pub const GROUND_CLEARANCE: f64 = 0.02;
 
+/// Per row of states (the 12 logged ones first), whether it is on the ground ([`GROUND_CLEARANCE`]).
+pub fn on_ground<const N: usize>(rows: &[[f64; N]]) -> Vec<bool> {
+    rows.iter().map(|r| r[2] <= GROUND_CLEARANCE).collect()
+}
+
+/// Whether a free run over samples `k ..= k + len` touches the ground (`ground` from [`on_ground`]).
+pub fn run_touches_ground(ground: &[bool], k: usize, len: usize) -> bool {
+    ground[k..=k + len].iter().any(|g| *g)
+}
+
 /// A validated flight log.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FlightLog {
