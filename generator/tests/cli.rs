@@ -678,6 +678,18 @@ fn identify_defaults_estimate_the_delays_and_write_a_bounded_model() {
     }
     assert_eq!(v["provenance"]["stale"], "interpolate");
     assert!(v["provenance"]["input_response"]["channels"]["u_vz"]["delay_range"].is_array());
+    // The second stage: every channel's delay tried over the horizon, and what it chose is what
+    // the model carries.
+    assert!(err.contains("delays refined over the horizon"), "{err}");
+    let refined = &v["provenance"]["input_response"]["refined_over_the_horizon"];
+    for (name, _) in truth {
+        let ch = &refined["channels"][name];
+        assert!(ch["scores"].as_array().is_some_and(|s| s.len() >= 4), "{refined}");
+        let d = c["latency"][name].as_f64().unwrap_or(0.0);
+        assert!((ch["delay"].as_f64().unwrap() - d).abs() < 1e-3, "{name}: {refined}");
+    }
+    let score = refined["score_before_after"].as_array().unwrap();
+    assert!(score[1].as_f64().unwrap() <= score[0].as_f64().unwrap(), "{refined}");
     // The model loads with its corrections, and the generator reads the delays.
     let model = uavgen::load(&out).unwrap_or_else(|e| panic!("{e}"));
     assert!(model.input_delays()[0] > 0.0);

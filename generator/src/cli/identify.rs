@@ -2,9 +2,11 @@
 
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
+use uavgen::evaluate::{evaluate, EvaluateOptions};
 use uavgen::identify::bounded_selection::select_bounded_with;
 use uavgen::identify::dataset::{build, DatasetOptions, Targets};
 use uavgen::identify::horizon_check::{self, HorizonCheck};
+use uavgen::identify::horizon_delay::{self, HeldOut, RefineOptions};
 use uavgen::identify::pd::{self, PdFitOptions};
 use uavgen::identify::preprocess::{LowPass, SavGol};
 use uavgen::identify::response::{self, InputResponse, ScanOptions, ScanSegment};
@@ -111,8 +113,10 @@ pub struct IdentifyArgs {
     #[arg(long, value_enum, default_value_t = CriterionArg::Bic)]
     criterion: CriterionArg,
     /// Input delays: `auto` (default) estimates each channel's delay (0 … 0.5 s) and, where it
-    /// improves held-out free runs, a first-order lag (0.02 … 0.8 s) from the logs and writes them
-    /// as `corrections.latency` / `corrections.actuator_lag`; `none` fits the inputs as logged; or
+    /// improves held-out free runs, a first-order lag (0.02 … 0.8 s) from the logs, then refines
+    /// each delay by the refitted model's held-out free runs over one horizon (kept where both
+    /// held-out ends improve by 5 %), and writes them as `corrections.latency` /
+    /// `corrections.actuator_lag`; `none` fits the inputs as logged; or
     /// seconds for every input, or per channel `u_vz=0.13,u_roll=0.08,…` (the others 0), no lags.
     #[arg(long, default_value = "auto")]
     input_delay: String,
@@ -338,7 +342,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             for c in &est.channels {
                 eprintln!("  {}", c.line());
             }
-            (Some(est.response), Some(est))
+            let refined = refine_delays(&args, &logs, &est.response, savgol, targets);
+            let response = refined.as_ref().map_or(est.response, |r| r.response);
+            (Some(response), Some((est, refined)))
         }
     };
     let dataset = build(
@@ -364,7 +370,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             Targets::Trapezoid => "integral",
         },
     });
-    if let Some(est) = &estimate {
+    if let Some((est, refined)) = &estimate {
         let channels: serde_json::Map<String, serde_json::Value> = est
             .channels
             .iter()
@@ -388,19 +394,14 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             "held_out": format!("{} {}", est.folds, est.fold_kind),
             "channels": channels,
         });
+        if let Some(r) = refined {
+            provenance["input_response"]["refined_over_the_horizon"] = refinement_json(r);
+        }
     }
     let json = match args.method {
         Method::Sindy => fit_sindy(&args, &dataset, logs.len(), &name, provenance, response)?,
         Method::Pd => {
-            check_positive("mass", args.mass)?;
-            let mut options = PdFitOptions {
-                mass: args.mass,
-                ..PdFitOptions::default()
-            };
-            if let Some(lambda) = args.lowpass {
-                check_positive("lowpass", lambda)?;
-                options.lowpass = Some(LowPass { lambda });
-            }
+            let options = pd_options(&args)?;
             eprintln!(
                 "fitting the PD model on {} samples from {} log(s) ...",
                 dataset.len(),
@@ -480,6 +481,223 @@ const RIDGE_LADDER: [f64; 3] = [1e-3, 1e-2, 1e-1];
 /// values until one MPC horizon stays bounded; without --alpha the ridge ladder is climbed until
 /// that succeeds (if no rung does, the one with the fewest unbounded trials is kept, for the
 /// caller's check to report).
+/// The PD fit's options of `args`.
+fn pd_options(args: &IdentifyArgs) -> Result<PdFitOptions, String> {
+    check_positive("mass", args.mass)?;
+    let mut options = PdFitOptions {
+        mass: args.mass,
+        ..PdFitOptions::default()
+    };
+    if let Some(lambda) = args.lowpass {
+        check_positive("lowpass", lambda)?;
+        options.lowpass = Some(LowPass { lambda });
+    }
+    Ok(options)
+}
+
+/// The second stage of `--input-delay auto` ([`horizon_delay`]): each channel's delay chosen by the
+/// held-out free runs of the model refitted on 80 % of every segment (its first and its last 20 %
+/// held out in turn). `None` (and a
+/// line saying why) when the logs are too short to hold a part out or the one-step response
+/// cannot be scored.
+fn refine_delays(
+    args: &IdentifyArgs,
+    logs: &[uavgen::logs::FlightLog],
+    start: &InputResponse,
+    savgol: SavGol,
+    targets: Targets,
+) -> Option<horizon_delay::Refinement> {
+    let options = RefineOptions::default();
+    let splits: Vec<_> = [HeldOut::Tail, HeldOut::Head]
+        .into_iter()
+        .map(|end| horizon_delay::split_logs(logs, options.train_share, REFINE_MIN_ROWS, end))
+        .collect();
+    if splits.iter().any(|(_, test)| test.is_empty()) {
+        eprintln!(
+            "  delays not refined over the horizon: no segment is long enough to hold out {:.0} % of it ({REFINE_MIN_ROWS} rows; the one-step delays are kept)",
+            100.0 * (1.0 - options.train_share)
+        );
+        return None;
+    }
+    let dt = median_period(logs)?;
+    let evaluate_options = EvaluateOptions {
+        dataset: DatasetOptions {
+            savgol,
+            ..DatasetOptions::default()
+        },
+        stale: args.stale,
+        ..EvaluateOptions::default()
+    };
+    // Per split: the held-out horizon RMSE of the model refitted with `r`.
+    let split_rmse = |r: &InputResponse, (train, test): &(Vec<_>, Vec<_>)| -> Option<f64> {
+        let model = candidate_model(args, train, r, savgol, targets)?;
+        let e = evaluate(&model, test, &evaluate_options).ok()?;
+        // A candidate whose free runs diverge is not a better model, whatever its finite runs say.
+        (e.horizon.diverged == 0).then_some(e.horizon.metrics?.overall_rmse)
+    };
+    // The worse split's RMSE relative to the start's (the first call scores the start).
+    let mut reference: Option<Vec<f64>> = None;
+    let mut score = |r: &InputResponse| -> Option<f64> {
+        let rmse: Vec<f64> = splits.iter().map(|sp| split_rmse(r, sp)).collect::<Option<_>>()?;
+        let base = reference.get_or_insert_with(|| rmse.clone());
+        rmse.iter().zip(base.iter()).map(|(a, b)| a / b).reduce(f64::max)
+    };
+    let refined = super::progress::with_spinner("refining the delays over the horizon", || {
+        horizon_delay::refine(start, dt, &options, &mut score)
+    });
+    match &refined {
+        Some(r) => {
+            eprintln!(
+                "  delays refined over the horizon (model refitted on {:.0} % of every segment, free runs of {} samples on the rest, its first and its last part in turn; score: the worse part's overall RMSE relative to the one-step delays'): {:.3} -> {:.3}",
+                100.0 * options.train_share,
+                evaluate_options.horizon,
+                r.before,
+                r.after
+            );
+            for c in &r.channels {
+                eprintln!(
+                    "  {:<10} delay {:.3} s -> {:.3} s (tried {})",
+                    c.input,
+                    c.one_step,
+                    c.delay,
+                    c.scores
+                        .iter()
+                        .map(|(d, s)| format!("{d:.3}: {s:.4}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+        }
+        None => eprintln!(
+            "  delays not refined over the horizon: the model with the one-step delays could not be fitted or its held-out free runs diverged (the one-step delays are kept)"
+        ),
+    }
+    refined
+}
+
+/// Rows each side of the split a segment needs to be held out in part.
+const REFINE_MIN_ROWS: usize = 90;
+
+/// The median sample period over every segment of `logs`.
+fn median_period(logs: &[uavgen::logs::FlightLog]) -> Option<f64> {
+    let mut steps: Vec<f64> = logs
+        .iter()
+        .flat_map(|l| &l.segments)
+        .flat_map(|s| s.t.windows(2).map(|w| w[1] - w[0]))
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .collect();
+    if steps.is_empty() {
+        return None;
+    }
+    steps.sort_by(f64::total_cmp);
+    Some(steps[steps.len() / 2])
+}
+
+/// The model `identify` would fit on `logs` with the input response `r`, quietly and without the
+/// horizon check or the ridge ladder (its first rung): a candidate of the delay refinement.
+fn candidate_model(
+    args: &IdentifyArgs,
+    logs: &[uavgen::logs::FlightLog],
+    r: &InputResponse,
+    savgol: SavGol,
+    targets: Targets,
+) -> Option<uavgen::model::Model> {
+    let dataset = build(
+        logs,
+        &DatasetOptions {
+            savgol,
+            response: Some(*r),
+            targets,
+            ..DatasetOptions::default()
+        },
+    )
+    .ok()?;
+    let file = match args.method {
+        Method::Sindy => {
+            let alpha = args.alpha.unwrap_or(RIDGE_LADDER[0]);
+            let options = sindy_options(args, alpha, sindy_sweep(args));
+            let fit = sindy::fit_with_progress(&dataset, &options, "candidate", serde_json::json!({}), &mut |_, _| {})
+                .ok()?;
+            serde_json::to_string(&fit.file).ok()?
+        }
+        Method::Pd => {
+            let fit = pd::fit(&dataset, &pd_options(args).ok()?, "candidate", serde_json::json!({})).ok()?;
+            serde_json::to_string(&fit.file).ok()?
+        }
+    };
+    let text = attach(&file, args, Some(*r)).ok()?;
+    uavgen::model::parse(&text, "candidate model").ok()
+}
+
+/// report of the refinement for the model's provenance.
+fn refinement_json(r: &horizon_delay::Refinement) -> serde_json::Value {
+    let channels: serde_json::Map<String, serde_json::Value> = r
+        .channels
+        .iter()
+        .map(|c| {
+            (
+                c.input.to_string(),
+                serde_json::json!({
+                    "one_step": round_s(c.one_step),
+                    "delay": round_s(c.delay),
+                    "scores": c.scores.iter().map(|(d, s)| serde_json::json!([round_s(*d), if s.is_finite() { serde_json::json!(s) } else { serde_json::Value::Null }])).collect::<Vec<_>>(),
+                }),
+            )
+        })
+        .collect();
+    serde_json::json!({
+        "held_out": format!("the first and the last {:.0} % of every segment in turn", 100.0 * (1.0 - RefineOptions::default().train_share)),
+        "score": "the worse held-out part's horizon RMSE relative to the one-step delays'",
+        "score_before_after": [r.before, r.after],
+        "channels": channels,
+    })
+}
+
+/// The sparsity values the SINDy fit sweeps (`None`: one value, --threshold).
+fn sindy_sweep(args: &IdentifyArgs) -> Option<Vec<f64>> {
+    let threshold = args.threshold.unwrap_or(0.05);
+    let sweeping = args.sweep || args.threshold.is_none();
+    sweeping.then(|| match (&args.sweep_values, args.optimizer) {
+        (Some(v), _) => v.clone(),
+        (None, OptimizerArg::Stlsq) => stlsq_sweep(),
+        (None, _) => SR3_SWEEP.iter().map(|f| threshold.max(1e-3) * f).collect(),
+    })
+}
+
+/// The SINDy options of `args` with ridge weight `alpha`.
+fn sindy_options(args: &IdentifyArgs, alpha: f64, sweep: Option<Vec<f64>>) -> SindyOptions {
+    let threshold = args.threshold.unwrap_or(0.05);
+    let optimizer = match args.optimizer {
+        OptimizerArg::Stlsq => Optimizer::Stlsq {
+            threshold,
+            alpha,
+            max_iter: 20,
+            unbias: true,
+        },
+        OptimizerArg::Sr3L0 => Optimizer::sr3(Regularizer::L0, threshold),
+        OptimizerArg::Sr3L1 => Optimizer::sr3(Regularizer::L1, threshold),
+    };
+    SindyOptions {
+        library: match args.library {
+            LibraryArg::Paper => LibraryKind::Paper,
+            LibraryArg::Physics => LibraryKind::Physics,
+        },
+        optimizer,
+        sweep,
+        selection: AicSelection::PerRow,
+        criterion: match args.criterion {
+            CriterionArg::Aic => Criterion::Aic,
+            CriterionArg::Bic => Criterion::Bic,
+        },
+        rows: if args.all_rows {
+            FittedRows::All
+        } else {
+            FittedRows::Dynamic
+        },
+        ..SindyOptions::default()
+    }
+}
+
 fn fit_sindy(
     args: &IdentifyArgs,
     dataset: &uavgen::identify::dataset::Dataset,
@@ -488,13 +706,7 @@ fn fit_sindy(
     provenance: serde_json::Value,
     response: Option<InputResponse>,
 ) -> Result<String, String> {
-    let threshold = args.threshold.unwrap_or(0.05);
-    let sweeping = args.sweep || args.threshold.is_none();
-    let sweep = sweeping.then(|| match (&args.sweep_values, args.optimizer) {
-        (Some(v), _) => v.clone(),
-        (None, OptimizerArg::Stlsq) => stlsq_sweep(),
-        (None, _) => SR3_SWEEP.iter().map(|f| threshold.max(1e-3) * f).collect(),
-    });
+    let sweep = sindy_sweep(args);
     let ladder: Vec<f64> = match (args.alpha, args.optimizer) {
         (Some(a), _) => vec![a],
         (None, OptimizerArg::Stlsq) if sweep.is_some() && !args.no_horizon_check => RIDGE_LADDER.to_vec(),
@@ -504,35 +716,7 @@ fn fit_sindy(
     // The fit kept: the first rung that passes, else the one with the fewest unbounded trials.
     let mut fit: Option<(usize, f64, sindy::SindyFit)> = None;
     for (rung, &alpha) in ladder.iter().enumerate() {
-        let optimizer = match args.optimizer {
-            OptimizerArg::Stlsq => Optimizer::Stlsq {
-                threshold,
-                alpha,
-                max_iter: 20,
-                unbias: true,
-            },
-            OptimizerArg::Sr3L0 => Optimizer::sr3(Regularizer::L0, threshold),
-            OptimizerArg::Sr3L1 => Optimizer::sr3(Regularizer::L1, threshold),
-        };
-        let options = SindyOptions {
-            library: match args.library {
-                LibraryArg::Paper => LibraryKind::Paper,
-                LibraryArg::Physics => LibraryKind::Physics,
-            },
-            optimizer,
-            sweep: sweep.clone(),
-            selection: AicSelection::PerRow,
-            criterion: match args.criterion {
-                CriterionArg::Aic => Criterion::Aic,
-                CriterionArg::Bic => Criterion::Bic,
-            },
-            rows: if args.all_rows {
-                FittedRows::All
-            } else {
-                FittedRows::Dynamic
-            },
-            ..SindyOptions::default()
-        };
+        let options = sindy_options(args, alpha, sweep.clone());
         let bar = super::progress::bar(options.sweep.as_ref().map_or(1, Vec::len), "sparsity values");
         let mut f = sindy::fit_with_progress(dataset, &options, name, provenance.clone(), &mut |done, _| {
             bar.set_position(done as u64)
