@@ -251,6 +251,8 @@ impl Structure {
             b_x: grid(nx, 1, nu, &|i, _, j| b[i][j]),
             bt_x: grid(nu, 1, nx, &|r, _, k| b[k][r]),
             at_x: grid(nx, 1, nx, &|i, _, k| a[k][i]),
+            chains_a: grid(nx, nu, nx, &|c, r, k| a[k][c] && e[r][k]),
+            chains_b: grid(nu, nu, nx, &|c, r, k| b[k][c] && e[r][k]),
         }
     }
 
@@ -337,6 +339,52 @@ impl Structure {
                 })
                 .collect::<Vec<_>>()
         };
+        // One loop over the chains' lanes i per output row c, all NU entries (c, r) in its body.
+        let lanes = |grid: &Vec<Vec<Vec<usize>>>,
+                     c: usize,
+                     keep: &dyn Fn(usize) -> bool,
+                     out: &dyn Fn(Literal) -> TokenStream,
+                     factor: &dyn Fn(Literal, Literal) -> TokenStream| {
+            grid[c]
+                .iter()
+                .enumerate()
+                .filter(|&(r, terms)| !terms.is_empty() || keep(r))
+                .map(|(r, terms)| {
+                    let s = sum(terms, None, &|k| factor(k, ix(r)));
+                    let o = out(ix(r));
+                    quote!(#o = #s;)
+                })
+                .collect::<Vec<_>>()
+        };
+        let chains_a = (0..self.nx)
+            .filter_map(|c| {
+                let cl = ix(c);
+                let body = lanes(
+                    &t.chains_a,
+                    c,
+                    &|r| self.e[r][c],
+                    &|r| quote!(out[#cl][#r][i]),
+                    &|k, r| quote!(w[#k][#r][i] * a[#k][#cl]),
+                );
+                (!body.is_empty()).then(|| quote!(for i in from..N { #(#body)* }))
+            })
+            .collect::<Vec<_>>();
+        let chains_b = (0..self.nu)
+            .map(|c| {
+                let cl = ix(c);
+                let body = lanes(
+                    &t.chains_b,
+                    c,
+                    &|_| true,
+                    &|r| quote!(t[#r][i]),
+                    &|k, r| quote!(w[#k][#r][i] * b[#k][#cl]),
+                );
+                quote! {
+                    for i in from..N { #(#body)* }
+                    scatter(&t, j * NU + #cl, from, h);
+                }
+            })
+            .collect::<Vec<_>>();
         let a_x = vector(&t.a_x, &|i| Some(quote!(y[#i])), &|i, j| quote!(a[#i][#j] * x[#j]));
         let b_x = vector(&t.b_x, &|i| Some(quote!(y[#i])), &|i, j| quote!(b[#i][#j] * v[#j]));
         let bt_x = vector(&t.bt_x, &|r| Some(quote!(y[#r])), &|r, k| quote!(b[#k][#r] * p[#k]));
@@ -387,7 +435,7 @@ impl Structure {
             #![doc = #doc]
             #![allow(clippy::all, unused_variables, unused_mut)]
 
-            use crate::{Real, NU, NX};
+            use crate::{Real, N, NU, NV, NX};
 
             /// Structural non-zeros of Aₖ = ∂F/∂x.
             pub const A_PATTERN: [[bool; NX]; NX] = #pa_;
@@ -424,6 +472,39 @@ impl Structure {
                 let mut out = [[0.0; NX]; NU];
                 #(#e_a)*
                 out
+            }
+
+            /// Every chain of the condensing at once: `w[k][r][i]` is entry (r, k) of the chain Eᵢ
+            /// (NU × NX) of stage i, the stages contiguous (a loop the compiler vectorises).
+            pub type Chains = [[[Real; N]; NU]; NX];
+
+            /// Eᵢ ← Eᵢ A for the chains i in `from..N` (E with `E_PATTERN`; the terms of `e_a`).
+            /// Entries outside `E_PATTERN` are neither read nor written.
+            #[inline(always)]
+            pub fn chains_a(w: &Chains, a: &[[Real; NX]; NX], out: &mut Chains, from: usize) {
+                #(#chains_a)*
+            }
+
+            /// H_ij = Eᵢ B_j for the chains i in `from..N` into the condensed Hessian, and
+            /// H_ji = H_ijᵀ (the terms of `e_b`).
+            #[inline(always)]
+            pub fn chains_b(w: &Chains, b: &[[Real; NU]; NX], j: usize, from: usize, h: &mut [[Real; NV]; NV]) {
+                let j = j.min(N - 1);
+                let mut t = [[0.0; N]; NU];
+                #(#chains_b)*
+            }
+
+            /// H[i NU + r][col] = H[col][i NU + r] = t[r][i] for i in `from..N`.
+            #[inline(always)]
+            fn scatter(t: &[[Real; N]; NU], col: usize, from: usize, h: &mut [[Real; NV]; NV]) {
+                let col = col.min(NV - 1);
+                for i in from..N {
+                    for r in 0..NU {
+                        let v = t[r][i];
+                        h[i * NU + r][col] = v;
+                        h[col][i * NU + r] = v;
+                    }
+                }
             }
 
             /// Aᵀ (P A) (P with `P_PATTERN`).
@@ -482,6 +563,9 @@ struct Terms {
     b_x: Vec<Vec<Vec<usize>>>,
     bt_x: Vec<Vec<Vec<usize>>>,
     at_x: Vec<Vec<Vec<usize>>>,
+    /// The chains' kernels, per (c, r): the same terms as `e_a`, `e_b` per (r, c).
+    chains_a: Vec<Vec<Vec<usize>>>,
+    chains_b: Vec<Vec<Vec<usize>>>,
 }
 
 #[cfg(test)]
