@@ -74,17 +74,29 @@ pub fn e_a(e: &[[Real; NX]; NU], a: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
 /// product over all the chains the condensing carries, a loop the compiler vectorises.
 pub type Chains = [[[Real; N]; NU]; NX];
 
-/// Eᵢ ← Eᵢ A for the chains i in `from..N`: `out[c][r][i]` = Σₖ `w[k][r][i]` a[k][c] (E with
-/// `E_PATTERN`; entry by entry the sum of [`e_a`]).
-pub fn chains_a(w: &Chains, a: &[[Real; NX]; NX], out: &mut Chains, from: usize) {
+/// Rows (c, r) of the chains that `chains_a` overwrites while a later row still reads them (the
+/// emitted kernel saves only those; the dense one all NX·NU).
+pub const SAVED_ROWS: usize = NX * NU;
+
+/// The workspace of `chains_a`.
+pub type SavedRows = [[Real; N]; SAVED_ROWS];
+
+/// Eᵢ ← Eᵢ A in place for the chains i in `from..N`: `w[c][r][i]` = Σₖ `w[k][r][i]` a[k][c] of
+/// the old `w` (E with `E_PATTERN`; entry by entry the sum of [`e_a`]); `saved` is scratch.
+pub fn chains_a(w: &mut Chains, a: &[[Real; NX]; NX], from: usize, saved: &mut SavedRows) {
+    for k in 0..NX {
+        for r in 0..NU {
+            saved[k * NU + r] = w[k][r];
+        }
+    }
     for c in 0..NX {
         for r in 0..NU {
             for i in from..N {
                 let mut s = 0.0;
                 for k in 0..NX {
-                    s += w[k][r][i] * a[k][c];
+                    s += saved[k * NU + r][i] * a[k][c];
                 }
-                out[c][r][i] = s;
+                w[c][r][i] = s;
             }
         }
     }
@@ -109,7 +121,8 @@ pub fn chains_b(w: &Chains, b: &[[Real; NU]; NX], j: usize, from: usize, h: &mut
     }
 }
 
-/// Aᵀ (P A) (P with `P_PATTERN`).
+/// Aᵀ (P A) (P with `P_PATTERN`): its upper triangle, mirrored (the result is exactly
+/// symmetric).
 pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
     let mut t = [[0.0; NX]; NX];
     for r in 0..NX {
@@ -123,12 +136,13 @@ pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
     }
     let mut out = [[0.0; NX]; NX];
     for r in 0..NX {
-        for c in 0..NX {
+        for c in r..NX {
             let mut s = 0.0;
             for k in 0..NX {
                 s += a[k][r] * t[k][c];
             }
             out[r][c] = s;
+            out[c][r] = s;
         }
     }
     out

@@ -84,8 +84,8 @@ pub struct Mpc {
     v: [Real; NV],
     /// Free response / state step workspace.
     z: [[Real; NX]; N + 1],
-    /// The condensing's chains, two buffers (`condense`).
-    chains: [kernels::Chains; 2],
+    /// The condensing's chains (`condense`).
+    chains: kernels::Chains,
     qp: BoxQp<NV>,
     phase: Phase,
 }
@@ -167,7 +167,7 @@ impl Mpc {
             hi: [0.0; NV],
             v: [0.0; NV],
             z: [[0.0; NX]; N + 1],
-            chains: [[[[0.0; N]; NU]; NX]; 2],
+            chains: [[[0.0; N]; NU]; NX],
             qp: BoxQp::new(),
             phase: Phase::Stale,
         }
@@ -286,16 +286,14 @@ impl Mpc {
         for r in 0..NX {
             p[r][r] = Q_TERMINAL[r];
         }
-        // The chains Eᵢ of every stage i > j side by side (`kernels::Chains`): they hold
-        // Mᵢ Aᵢ ⋯ A_{j+2} in `w` and are multiplied by A_{j+1} into `next` (then the two swap).
-        let [first, second] = &mut self.chains;
-        let (mut w, mut next) = (first, second);
+        // The chains Eᵢ of every stage i > j side by side (`kernels::Chains`): Mᵢ Aᵢ ⋯ A_{j+2},
+        // multiplied in place by A_{j+1}.
+        let mut saved: kernels::SavedRows = [[0.0; N]; kernels::SAVED_ROWS];
         for j in (0..N).rev() {
             let bj = &self.b[j];
             if j + 1 < N {
                 // Eᵢ ← Eᵢ A_{j+1} for i > j (Eⱼ₊₁ = Mⱼ₊₁ to start with)
-                kernels::chains_a(w, &self.a[j + 1], next, j + 1);
-                core::mem::swap(&mut w, &mut next);
+                kernels::chains_a(&mut self.chains, &self.a[j + 1], j + 1, &mut saved);
             }
             // M = Bⱼᵀ P
             let m = kernels::bt_p(bj, &p);
@@ -307,11 +305,11 @@ impl Mpc {
                 self.h[j * NU + r][j * NU..(j + 1) * NU].copy_from_slice(&hjj[r]);
             }
             // H_ij = Eᵢ Bⱼ with Eᵢ = Mᵢ Aᵢ ⋯ A_{j+1} (i > j), and H_ji = H_ijᵀ
-            kernels::chains_b(w, bj, j, j + 1, &mut self.h);
+            kernels::chains_b(&self.chains, bj, j, j + 1, &mut self.h);
             // The chain of stage j starts at M.
             for k in 0..NX {
                 for r in 0..NU {
-                    w[k][r][j] = m[r][k];
+                    self.chains[k][r][j] = m[r][k];
                 }
             }
             if j > 0 {

@@ -85,8 +85,8 @@ pub struct Mpc {
     v: [Real; NV],
     /// Free response / state step workspace.
     z: [[Real; NX]; N + 1],
-    /// The condensing's chains, two buffers (`condense`).
-    chains: [kernels::Chains; 2],
+    /// The condensing's chains (`condense`).
+    chains: kernels::Chains,
     qp: BoxQp<NV>,
     phase: Phase,
 }
@@ -159,7 +159,7 @@ impl Mpc {
             hi: [0.0; NV],
             v: [0.0; NV],
             z: [[0.0; NX]; N + 1],
-            chains: [[[[0.0; N]; NU]; NX]; 2],
+            chains: [[[0.0; N]; NU]; NX],
             qp: BoxQp::new(),
             phase: Phase::Stale,
         }
@@ -266,13 +266,11 @@ impl Mpc {
         for r in 0..NX {
             p[r][r] = Q_TERMINAL[r];
         }
-        let [first, second] = &mut self.chains;
-        let (mut w, mut next) = (first, second);
+        let mut saved: kernels::SavedRows = [[0.0; N]; kernels::SAVED_ROWS];
         for j in (0..N).rev() {
             let bj = &self.b[j];
             if j + 1 < N {
-                kernels::chains_a(w, &self.a[j + 1], next, j + 1);
-                core::mem::swap(&mut w, &mut next);
+                kernels::chains_a(&mut self.chains, &self.a[j + 1], j + 1, &mut saved);
             }
             let m = kernels::bt_p(bj, &p);
             let mut hjj = kernels::e_b(&m, bj);
@@ -280,10 +278,10 @@ impl Mpc {
                 hjj[r][r] += if is_sent(j, r) { 1.0 } else { R[r] + REGULARISATION };
                 self.h[j * NU + r][j * NU..(j + 1) * NU].copy_from_slice(&hjj[r]);
             }
-            kernels::chains_b(w, bj, j, j + 1, &mut self.h);
+            kernels::chains_b(&self.chains, bj, j, j + 1, &mut self.h);
             for k in 0..NX {
                 for r in 0..NU {
-                    w[k][r][j] = m[r][k];
+                    self.chains[k][r][j] = m[r][k];
                 }
             }
             if j > 0 {
