@@ -13,7 +13,7 @@ macro_rules! structure_tests {
         mod $name {
             use super::*;
             use $krate::kernels::*;
-            use $krate::{Real, NU, NX, Q, Q_TERMINAL};
+            use $krate::{Real, N, NU, NV, NX, Q, Q_TERMINAL};
 
             type A = [[Real; NX]; NX];
             type B = [[Real; NU]; NX];
@@ -85,12 +85,13 @@ macro_rules! structure_tests {
                 }
                 let mut out = [[0.0; NX]; NX];
                 for r in 0..NX {
-                    for c in 0..NX {
+                    for c in r..NX {
                         let mut s = 0.0;
                         for k in 0..NX {
                             s += a[k][r] * t[k][c];
                         }
                         out[r][c] = s;
+                        out[c][r] = s;
                     }
                 }
                 out
@@ -153,6 +154,49 @@ macro_rules! structure_tests {
                     prop_assert_eq!(e_b(&e, &b), dense_e_b(&e, &b));
                     prop_assert_eq!(e_a(&e, &a), dense_e_a(&e, &a));
                     prop_assert_eq!(at_p_a(&p, &a), dense_at_p_a(&p, &a));
+                    // The chains of every stage at once: chain i is E scaled by (i + 1), lanes
+                    // before `from` are left alone (chains_a) and H gets E B both ways (chains_b).
+                    let from = 3;
+                    let mut w: Chains = [[[0.0; N]; NU]; NX];
+                    let chain = |i: usize| -> E {
+                        let mut ei = e;
+                        for row in ei.iter_mut() {
+                            for v in row.iter_mut() {
+                                *v *= (i + 1) as Real;
+                            }
+                        }
+                        ei
+                    };
+                    for i in 0..N {
+                        let ei = chain(i);
+                        for k in 0..NX {
+                            for r in 0..NU {
+                                w[k][r][i] = ei[r][k];
+                            }
+                        }
+                    }
+                    let mut out: Chains = w;
+                    chains_a(&mut out, &a, from, &mut [[0.0; N]; SAVED_ROWS]);
+                    let mut h = [[0.0; NV]; NV];
+                    let j = 1;
+                    chains_b(&w, &b, j, from, &mut h);
+                    for i in 0..N {
+                        let (ea, eb) = (dense_e_a(&chain(i), &a), dense_e_b(&chain(i), &b));
+                        for r in 0..NU {
+                            for c in 0..NX {
+                                if i < from {
+                                    prop_assert_eq!(out[c][r][i], w[c][r][i]);
+                                } else if E_PATTERN[r][c] {
+                                    prop_assert_eq!(out[c][r][i], ea[r][c]);
+                                }
+                            }
+                            for c in 0..NU {
+                                let expected = if i < from { 0.0 } else { eb[r][c] };
+                                prop_assert_eq!(h[i * NU + r][j * NU + c], expected);
+                                prop_assert_eq!(h[j * NU + c][i * NU + r], expected);
+                            }
+                        }
+                    }
                     let mut ax = x;
                     let mut bv = x;
                     let mut atx = [0.0; NX];

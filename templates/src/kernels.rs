@@ -8,7 +8,7 @@
 //! index), so for inputs that are zero outside the patterns the emitted kernels return the same
 //! numbers as these.
 
-use crate::{Real, NU, NX};
+use crate::{Real, N, NU, NV, NX};
 
 /// Structural non-zeros of Aₖ = ∂F/∂x (all true: dense reference).
 pub const A_PATTERN: [[bool; NX]; NX] = [[true; NX]; NX];
@@ -69,7 +69,60 @@ pub fn e_a(e: &[[Real; NX]; NU], a: &[[Real; NX]; NX]) -> [[Real; NX]; NU] {
     out
 }
 
-/// Aᵀ (P A) (P with `P_PATTERN`).
+/// Every chain of the condensing at once: `w[k][r][i]` is entry (r, k) of the chain Eᵢ (NU × NX)
+/// of stage i. The stages i are the innermost, contiguous index, so each term of E A or E B is one
+/// product over all the chains the condensing carries, a loop the compiler vectorises.
+pub type Chains = [[[Real; N]; NU]; NX];
+
+/// Rows (c, r) of the chains that `chains_a` overwrites while a later row still reads them (the
+/// emitted kernel saves only those; the dense one all NX·NU).
+pub const SAVED_ROWS: usize = NX * NU;
+
+/// The workspace of `chains_a`.
+pub type SavedRows = [[Real; N]; SAVED_ROWS];
+
+/// Eᵢ ← Eᵢ A in place for the chains i in `from..N`: `w[c][r][i]` = Σₖ `w[k][r][i]` a[k][c] of
+/// the old `w` (E with `E_PATTERN`; entry by entry the sum of [`e_a`]); `saved` is scratch.
+pub fn chains_a(w: &mut Chains, a: &[[Real; NX]; NX], from: usize, saved: &mut SavedRows) {
+    for k in 0..NX {
+        for r in 0..NU {
+            saved[k * NU + r] = w[k][r];
+        }
+    }
+    for c in 0..NX {
+        for r in 0..NU {
+            for i in from..N {
+                let mut s = 0.0;
+                for k in 0..NX {
+                    s += saved[k * NU + r][i] * a[k][c];
+                }
+                w[c][r][i] = s;
+            }
+        }
+    }
+}
+
+/// H_ij = Eᵢ B_j for the chains i in `from..N` into the condensed Hessian, and H_ji = H_ijᵀ:
+/// H[i NU + r][j NU + c] = H[j NU + c][i NU + r] = Σₖ `w[k][r][i]` b[k][c] (entry by entry the
+/// sum of [`e_b`]).
+pub fn chains_b(w: &Chains, b: &[[Real; NU]; NX], j: usize, from: usize, h: &mut [[Real; NV]; NV]) {
+    let j = j.min(N - 1);
+    for c in 0..NU {
+        for r in 0..NU {
+            for i in from..N {
+                let mut s = 0.0;
+                for k in 0..NX {
+                    s += w[k][r][i] * b[k][c];
+                }
+                h[i * NU + r][j * NU + c] = s;
+                h[j * NU + c][i * NU + r] = s;
+            }
+        }
+    }
+}
+
+/// Aᵀ (P A) (P with `P_PATTERN`): its upper triangle, mirrored (the result is exactly
+/// symmetric).
 pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
     let mut t = [[0.0; NX]; NX];
     for r in 0..NX {
@@ -83,12 +136,13 @@ pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
     }
     let mut out = [[0.0; NX]; NX];
     for r in 0..NX {
-        for c in 0..NX {
+        for c in r..NX {
             let mut s = 0.0;
             for k in 0..NX {
                 s += a[k][r] * t[k][c];
             }
             out[r][c] = s;
+            out[c][r] = s;
         }
     }
     out

@@ -15,6 +15,12 @@ pub fn cos(x: Real) -> Real {
     Libm::<Real>::cos(x)
 }
 
+/// (sin x, cos x) with one argument reduction: the same values as [`sin`] and [`cos`].
+#[inline]
+pub fn sincos(x: Real) -> (Real, Real) {
+    Libm::<Real>::sincos(x)
+}
+
 /// √x
 #[inline]
 pub fn sqrt(x: Real) -> Real {
@@ -51,5 +57,18 @@ mod tests {
     fn trig_is_libm() {
         assert!((sin(0.5) - 0.479_425_538_604_203).abs() < 1e-15);
         assert!((cos(0.5) - 0.877_582_561_890_372_8).abs() < 1e-15);
+    }
+
+    #[test]
+    fn sincos_is_sin_and_cos() {
+        // Tiny, small and reduced arguments, both signs: the same bits as sin and cos.
+        let mut x: Real = 1e-12;
+        while x < 1e4 {
+            for v in [x, -x] {
+                assert_eq!(sincos(v), (sin(v), cos(v)), "x = {v}");
+            }
+            x *= 1.013;
+        }
+        assert_eq!(sincos(0.0), (sin(0.0), cos(0.0)));
     }
 }

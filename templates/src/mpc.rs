@@ -84,6 +84,8 @@ pub struct Mpc {
     v: [Real; NV],
     /// Free response / state step workspace.
     z: [[Real; NX]; N + 1],
+    /// The condensing's chains (`condense`).
+    chains: kernels::Chains,
     qp: BoxQp<NV>,
     phase: Phase,
 }
@@ -165,6 +167,7 @@ impl Mpc {
             hi: [0.0; NV],
             v: [0.0; NV],
             z: [[0.0; NX]; N + 1],
+            chains: [[[0.0; N]; NU]; NX],
             qp: BoxQp::new(),
             phase: Phase::Stale,
         }
@@ -274,38 +277,44 @@ impl Mpc {
 
     /// Condensed Hessian by the backward recursion (the prediction matrix is never formed):
     /// P_N = Q_N, Mᵢ = Bᵢᵀ Pᵢ₊₁, H_ii = Mᵢ Bᵢ + R + δI, H_ij = Mᵢ Aᵢ Aᵢ₋₁ ⋯ A_{j+1} B_j (j < i),
-    /// Pᵢ = Q + Aᵢᵀ Pᵢ₊₁ Aᵢ.
+    /// Pᵢ = Q + Aᵢᵀ Pᵢ₊₁ Aᵢ. Column block j of H is formed at once for every i > j: the chains
+    /// Eᵢ = Mᵢ Aᵢ ⋯ A_{j+1} of all later stages are carried together and each multiplied by the same
+    /// A_{j+1}, then by B_j (`kernels::chains_a`, `chains_b`; the same sums as E A and E B chain by
+    /// chain).
     fn condense(&mut self) {
         let mut p = [[0.0; NX]; NX];
         for r in 0..NX {
             p[r][r] = Q_TERMINAL[r];
         }
-        for i in (0..N).rev() {
-            let bi = &self.b[i];
-            // M = Bᵢᵀ P
-            let m = kernels::bt_p(bi, &p);
-            // H_ii = M Bᵢ + R + δI; an input sent already (column of Bᵢ zero) gets H_ii = 1 and
-            // gradient 0 (`feedback`): decoupled, its step is 0.
-            let mut hii = kernels::e_b(&m, bi);
-            for r in 0..NU {
-                hii[r][r] += if is_sent(i, r) { 1.0 } else { R[r] + REGULARISATION };
-                self.h[i * NU + r][i * NU..(i + 1) * NU].copy_from_slice(&hii[r]);
+        // The chains Eᵢ of every stage i > j side by side (`kernels::Chains`): Mᵢ Aᵢ ⋯ A_{j+2},
+        // multiplied in place by A_{j+1}.
+        let mut saved: kernels::SavedRows = [[0.0; N]; kernels::SAVED_ROWS];
+        for j in (0..N).rev() {
+            let bj = &self.b[j];
+            if j + 1 < N {
+                // Eᵢ ← Eᵢ A_{j+1} for i > j (Eⱼ₊₁ = Mⱼ₊₁ to start with)
+                kernels::chains_a(&mut self.chains, &self.a[j + 1], j + 1, &mut saved);
             }
-            // E = M Aᵢ ⋯ A_{j+1}, H_ij = E B_j and H_ji = H_ijᵀ
-            let mut e = m;
-            for j in (0..i).rev() {
-                e = kernels::e_a(&e, &self.a[j + 1]);
-                let hij = kernels::e_b(&e, &self.b[j]);
+            // M = Bⱼᵀ P
+            let m = kernels::bt_p(bj, &p);
+            // H_jj = M Bⱼ + R + δI; an input sent already (column of Bⱼ zero) gets H_jj = 1 and
+            // gradient 0 (`feedback`): decoupled, its step is 0.
+            let mut hjj = kernels::e_b(&m, bj);
+            for r in 0..NU {
+                hjj[r][r] += if is_sent(j, r) { 1.0 } else { R[r] + REGULARISATION };
+                self.h[j * NU + r][j * NU..(j + 1) * NU].copy_from_slice(&hjj[r]);
+            }
+            // H_ij = Eᵢ Bⱼ with Eᵢ = Mᵢ Aᵢ ⋯ A_{j+1} (i > j), and H_ji = H_ijᵀ
+            kernels::chains_b(&self.chains, bj, j, j + 1, &mut self.h);
+            // The chain of stage j starts at M.
+            for k in 0..NX {
                 for r in 0..NU {
-                    self.h[i * NU + r][j * NU..(j + 1) * NU].copy_from_slice(&hij[r]);
-                    for c in 0..NU {
-                        self.h[j * NU + c][i * NU + r] = hij[r][c];
-                    }
+                    self.chains[k][r][j] = m[r][k];
                 }
             }
-            if i > 0 {
-                // Pᵢ = Q + Aᵢᵀ (P Aᵢ)
-                p = kernels::at_p_a(&p, &self.a[i]);
+            if j > 0 {
+                // Pⱼ = Q + Aⱼᵀ (P Aⱼ)
+                p = kernels::at_p_a(&p, &self.a[j]);
                 for r in 0..NX {
                     p[r][r] += Q[r];
                 }

@@ -5,7 +5,7 @@
 //! Continuous-time model ẋ = f(x, u) and its analytic derivatives.
 #![allow(clippy::all, unused_variables, unused_mut, non_snake_case)]
 use crate::{Real, NU, NX, NZ};
-use crate::math::{cos, sin};
+use crate::math::sincos;
 /// ẋ = f(x, u) with x = [x, y, z, roll, pitch, yaw, vx, vy, vz, roll_rate, pitch_rate, yaw_rate] and u = [u_vz, u_roll, u_pitch, u_yaw_rate].
 pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
     let (
@@ -28,30 +28,27 @@ pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
         u_yaw_rate,
         ],
     ) = (*x, *u);
-    let t0 = sin(roll);
-    let t1 = cos(roll);
-    let t2 = sin(pitch);
-    let t3 = sin(yaw);
-    let t4 = cos(yaw);
-    let t5 = t1 * t2;
-    let t6 = t4 * t5;
-    let t7 = t0 * t3;
-    let t8 = t6 + t7;
-    let t9 = u_vz * 4.8;
-    let t10 = vz * 4.8;
-    let t11 = -t10;
-    let t12 = t9 + t11;
-    let t13 = 23.544 + t12;
-    let t14 = t13 * 0.41666666;
-    let t15 = t8 * t14;
-    let t16 = t3 * t5;
-    let t17 = t0 * t4;
-    let t18 = -t17;
-    let t19 = t16 + t18;
-    let t20 = t19 * t14;
-    let t21 = cos(pitch);
-    let t22 = t1 * t21;
-    let t23 = t22 * t13;
+    let (t0, t1) = sincos(roll);
+    let (t2, t3) = sincos(pitch);
+    let (t4, t5) = sincos(yaw);
+    let t6 = t1 * t2;
+    let t7 = t5 * t6;
+    let t8 = t0 * t4;
+    let t9 = t7 + t8;
+    let t10 = u_vz * 4.8;
+    let t11 = vz * 4.8;
+    let t12 = -t11;
+    let t13 = t10 + t12;
+    let t14 = 23.544 + t13;
+    let t15 = t14 * 0.41666666;
+    let t16 = t9 * t15;
+    let t17 = t4 * t6;
+    let t18 = t0 * t5;
+    let t19 = -t18;
+    let t20 = t17 + t19;
+    let t21 = t20 * t15;
+    let t22 = t1 * t3;
+    let t23 = t22 * t14;
     let t24 = t23 + -23.544;
     let t25 = t24 * 0.41666666;
     let t26 = u_roll * 3.2;
@@ -74,7 +71,7 @@ pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
     let t43 = t40 + t42;
     let t44 = -t2;
     let t45 = -t0;
-    let t46 = t0 * t21;
+    let t46 = t0 * t3;
     let t47 = t44 * 0.05;
     let t48 = t1 * 0.05;
     let t49 = t45 * 0.09;
@@ -104,7 +101,7 @@ pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
     let t73 = t45 * t68;
     let t74 = t72 + t73;
     let t75 = t71 + t74;
-    let t76 = t21 * t45;
+    let t76 = t3 * t45;
     let t77 = t22 * t48;
     let t78 = t46 * t67;
     let t79 = t77 + t78;
@@ -128,7 +125,7 @@ pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
     let t97 = t22 * t85;
     let t98 = t96 + t97;
     let t99 = t95 + t98;
-    let t100 = -t21;
+    let t100 = -t3;
     let t101 = 0.05 * t100;
     let t102 = t1 * t44;
     let t103 = t0 * t44;
@@ -262,7 +259,7 @@ pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
     let t231 = t228 + t229;
     let t232 = t230 + t231;
     let t233 = t208 * t232;
-    [vx, vy, vz, roll_rate, pitch_rate, yaw_rate, t15, t20, t25, t214, t226, t233]
+    [vx, vy, vz, roll_rate, pitch_rate, yaw_rate, t16, t21, t25, t214, t226, t233]
 }
 /// (∂f/∂x, ∂f/∂u) with `fx[i][j] = ∂fᵢ/∂xⱼ`, `fu[i][j] = ∂fᵢ/∂uⱼ`; structural zeros are not computed.
 pub fn continuous_jacobians(
@@ -291,60 +288,57 @@ pub fn continuous_jacobians(
     ) = (*x, *u);
     let mut fx = [[0.0; NX]; NX];
     let mut fu = [[0.0; NU]; NX];
-    let t0 = sin(roll);
-    let t1 = cos(roll);
-    let t2 = sin(pitch);
-    let t3 = sin(yaw);
-    let t4 = cos(yaw);
-    let t5 = u_vz * 4.8;
-    let t6 = vz * 4.8;
-    let t7 = -t6;
-    let t8 = t5 + t7;
-    let t9 = 23.544 + t8;
-    let t10 = t9 * 0.41666666;
-    let t11 = -t0;
-    let t12 = t2 * t11;
-    let t13 = t4 * t12;
-    let t14 = t1 * t3;
-    let t15 = t13 + t14;
-    let t16 = t10 * t15;
-    let t17 = cos(pitch);
-    let t18 = t1 * t17;
-    let t19 = t4 * t18;
-    let t20 = t10 * t19;
+    let (t0, t1) = sincos(roll);
+    let (t2, t3) = sincos(pitch);
+    let (t4, t5) = sincos(yaw);
+    let t6 = u_vz * 4.8;
+    let t7 = vz * 4.8;
+    let t8 = -t7;
+    let t9 = t6 + t8;
+    let t10 = 23.544 + t9;
+    let t11 = t10 * 0.41666666;
+    let t12 = -t0;
+    let t13 = t2 * t12;
+    let t14 = t5 * t13;
+    let t15 = t1 * t4;
+    let t16 = t14 + t15;
+    let t17 = t11 * t16;
+    let t18 = t1 * t3;
+    let t19 = t5 * t18;
+    let t20 = t11 * t19;
     let t21 = t1 * t2;
-    let t22 = t0 * t4;
-    let t23 = -t3;
+    let t22 = t0 * t5;
+    let t23 = -t4;
     let t24 = t21 * t23;
     let t25 = t22 + t24;
-    let t26 = t10 * t25;
-    let t27 = t4 * t21;
-    let t28 = t0 * t3;
+    let t26 = t11 * t25;
+    let t27 = t5 * t21;
+    let t28 = t0 * t4;
     let t29 = t27 + t28;
     let t30 = t29 * -2.0;
     let t31 = t29 * 2.0;
-    let t32 = t3 * t12;
-    let t33 = t1 * t4;
+    let t32 = t4 * t13;
+    let t33 = t1 * t5;
     let t34 = -t33;
     let t35 = t32 + t34;
-    let t36 = t10 * t35;
-    let t37 = t3 * t18;
-    let t38 = t10 * t37;
+    let t36 = t11 * t35;
+    let t37 = t4 * t18;
+    let t38 = t11 * t37;
     let t39 = t0 * t23;
     let t40 = -t39;
     let t41 = t27 + t40;
-    let t42 = t10 * t41;
-    let t43 = t3 * t21;
+    let t42 = t11 * t41;
+    let t43 = t4 * t21;
     let t44 = -t22;
     let t45 = t43 + t44;
     let t46 = t45 * -2.0;
     let t47 = t45 * 2.0;
-    let t48 = t17 * t11;
-    let t49 = t9 * t48;
+    let t48 = t3 * t12;
+    let t49 = t10 * t48;
     let t50 = 0.41666666 * t49;
     let t51 = -t2;
     let t52 = t1 * t51;
-    let t53 = t9 * t52;
+    let t53 = t10 * t52;
     let t54 = 0.41666666 * t53;
     let t55 = t18 * -2.0;
     let t56 = t18 * 2.0;
@@ -366,12 +360,12 @@ pub fn continuous_jacobians(
     let t72 = yaw_rate * 0.27;
     let t73 = -t72;
     let t74 = t71 + t73;
-    let t75 = t0 * t17;
+    let t75 = t0 * t3;
     let t76 = t51 * 0.05;
     let t77 = t1 * 0.05;
-    let t78 = t11 * 0.09;
+    let t78 = t12 * 0.09;
     let t79 = t1 * t77;
-    let t80 = t11 * t78;
+    let t80 = t12 * t78;
     let t81 = t79 + t80;
     let t82 = t75 * t77;
     let t83 = t18 * t78;
@@ -379,7 +373,7 @@ pub fn continuous_jacobians(
     let t85 = t75 * 0.05;
     let t86 = t18 * 0.09;
     let t87 = t1 * t85;
-    let t88 = t11 * t86;
+    let t88 = t12 * t86;
     let t89 = t87 + t88;
     let t90 = t51 * t76;
     let t91 = t75 * t85;
@@ -387,13 +381,13 @@ pub fn continuous_jacobians(
     let t93 = t90 + t91;
     let t94 = t92 + t93;
     let t95 = -t1;
-    let t96 = t11 * 0.05;
+    let t96 = t12 * 0.05;
     let t97 = 0.09 * t95;
-    let t98 = t11 * t77;
+    let t98 = t12 * t77;
     let t99 = t1 * t96;
     let t100 = t98 + t99;
     let t101 = t78 * t95;
-    let t102 = t11 * t97;
+    let t102 = t12 * t97;
     let t103 = t101 + t102;
     let t104 = t100 + t103;
     let t105 = t18 * t77;
@@ -405,11 +399,11 @@ pub fn continuous_jacobians(
     let t111 = t107 + t110;
     let t112 = t18 * 0.05;
     let t113 = 0.09 * t48;
-    let t114 = t11 * t85;
+    let t114 = t12 * t85;
     let t115 = t1 * t112;
     let t116 = t114 + t115;
     let t117 = t86 * t95;
-    let t118 = t11 * t113;
+    let t118 = t12 * t113;
     let t119 = t117 + t118;
     let t120 = t116 + t119;
     let t121 = t18 * t85;
@@ -419,7 +413,7 @@ pub fn continuous_jacobians(
     let t125 = t18 * t113;
     let t126 = t124 + t125;
     let t127 = t123 + t126;
-    let t128 = -t17;
+    let t128 = -t3;
     let t129 = 0.05 * t128;
     let t130 = t0 * t51;
     let t131 = t77 * t130;
@@ -428,7 +422,7 @@ pub fn continuous_jacobians(
     let t134 = 0.05 * t130;
     let t135 = 0.09 * t52;
     let t136 = t1 * t134;
-    let t137 = t11 * t135;
+    let t137 = t12 * t135;
     let t138 = t136 + t137;
     let t139 = t76 * t128;
     let t140 = t51 * t129;
@@ -535,7 +529,7 @@ pub fn continuous_jacobians(
     let t241 = 0.05 * t95;
     let t242 = t0 * 0.09;
     let t243 = t77 * t95;
-    let t244 = t11 * t96;
+    let t244 = t12 * t96;
     let t245 = t243 + t244;
     let t246 = t1 * t241;
     let t247 = t244 + t246;
@@ -543,11 +537,11 @@ pub fn continuous_jacobians(
     let t249 = t95 * t97;
     let t250 = t0 * t78;
     let t251 = t249 + t250;
-    let t252 = t11 * t242;
+    let t252 = t12 * t242;
     let t253 = t249 + t252;
     let t254 = t251 + t253;
     let t255 = t248 + t254;
-    let t256 = t17 * t95;
+    let t256 = t3 * t95;
     let t257 = t77 * t48;
     let t258 = t18 * t96;
     let t259 = t257 + t258;
@@ -564,7 +558,7 @@ pub fn continuous_jacobians(
     let t270 = 0.05 * t48;
     let t271 = 0.09 * t256;
     let t272 = t85 * t95;
-    let t273 = t11 * t112;
+    let t273 = t12 * t112;
     let t274 = t272 + t273;
     let t275 = t1 * t270;
     let t276 = t273 + t275;
@@ -572,7 +566,7 @@ pub fn continuous_jacobians(
     let t278 = t95 * t113;
     let t279 = t0 * t86;
     let t280 = t278 + t279;
-    let t281 = t11 * t271;
+    let t281 = t12 * t271;
     let t282 = t278 + t281;
     let t283 = t280 + t282;
     let t284 = t277 + t283;
@@ -589,7 +583,7 @@ pub fn continuous_jacobians(
     let t295 = t291 + t294;
     let t296 = t293 + t295;
     let t297 = t290 + t296;
-    let t298 = t51 * t11;
+    let t298 = t51 * t12;
     let t299 = t96 * t130;
     let t300 = t77 * t52;
     let t301 = t299 + t300;
@@ -599,11 +593,11 @@ pub fn continuous_jacobians(
     let t305 = t301 + t304;
     let t306 = 0.05 * t52;
     let t307 = 0.09 * t298;
-    let t308 = t11 * t134;
+    let t308 = t12 * t134;
     let t309 = t1 * t306;
     let t310 = t308 + t309;
     let t311 = t95 * t135;
-    let t312 = t11 * t307;
+    let t312 = t12 * t307;
     let t313 = t311 + t312;
     let t314 = t310 + t313;
     let t315 = t112 * t130;
@@ -736,7 +730,7 @@ pub fn continuous_jacobians(
     let t442 = 0.05 * t438;
     let t443 = 0.09 * t437;
     let t444 = t1 * t442;
-    let t445 = t11 * t443;
+    let t445 = t12 * t443;
     let t446 = t444 + t445;
     let t447 = t128 * t129;
     let t448 = t2 * t76;
@@ -1041,7 +1035,7 @@ pub fn continuous_jacobians(
     fx[3][9] = 1.0;
     fx[4][10] = 1.0;
     fx[5][11] = 1.0;
-    fx[6][3] = t16;
+    fx[6][3] = t17;
     fx[6][4] = t20;
     fx[6][5] = t26;
     fx[6][8] = t30;
@@ -1108,30 +1102,27 @@ pub fn continuous_sensitivity(
         u_yaw_rate,
         ],
     ) = (*x, *u);
-    let t0 = sin(roll);
-    let t1 = cos(roll);
-    let t2 = sin(pitch);
-    let t3 = sin(yaw);
-    let t4 = cos(yaw);
-    let t5 = t1 * t2;
-    let t6 = t4 * t5;
-    let t7 = t0 * t3;
-    let t8 = t6 + t7;
-    let t9 = u_vz * 4.8;
-    let t10 = vz * 4.8;
-    let t11 = -t10;
-    let t12 = t9 + t11;
-    let t13 = 23.544 + t12;
-    let t14 = t13 * 0.41666666;
-    let t15 = t8 * t14;
-    let t16 = t3 * t5;
-    let t17 = t0 * t4;
-    let t18 = -t17;
-    let t19 = t16 + t18;
-    let t20 = t19 * t14;
-    let t21 = cos(pitch);
-    let t22 = t1 * t21;
-    let t23 = t22 * t13;
+    let (t0, t1) = sincos(roll);
+    let (t2, t3) = sincos(pitch);
+    let (t4, t5) = sincos(yaw);
+    let t6 = t1 * t2;
+    let t7 = t5 * t6;
+    let t8 = t0 * t4;
+    let t9 = t7 + t8;
+    let t10 = u_vz * 4.8;
+    let t11 = vz * 4.8;
+    let t12 = -t11;
+    let t13 = t10 + t12;
+    let t14 = 23.544 + t13;
+    let t15 = t14 * 0.41666666;
+    let t16 = t9 * t15;
+    let t17 = t4 * t6;
+    let t18 = t0 * t5;
+    let t19 = -t18;
+    let t20 = t17 + t19;
+    let t21 = t20 * t15;
+    let t22 = t1 * t3;
+    let t23 = t22 * t14;
     let t24 = t23 + -23.544;
     let t25 = t24 * 0.41666666;
     let t26 = u_roll * 3.2;
@@ -1154,7 +1145,7 @@ pub fn continuous_sensitivity(
     let t43 = t40 + t42;
     let t44 = -t2;
     let t45 = -t0;
-    let t46 = t0 * t21;
+    let t46 = t0 * t3;
     let t47 = t44 * 0.05;
     let t48 = t1 * 0.05;
     let t49 = t45 * 0.09;
@@ -1184,7 +1175,7 @@ pub fn continuous_sensitivity(
     let t73 = t45 * t68;
     let t74 = t72 + t73;
     let t75 = t71 + t74;
-    let t76 = t21 * t45;
+    let t76 = t3 * t45;
     let t77 = t22 * t48;
     let t78 = t46 * t67;
     let t79 = t77 + t78;
@@ -1208,7 +1199,7 @@ pub fn continuous_sensitivity(
     let t97 = t22 * t85;
     let t98 = t96 + t97;
     let t99 = t95 + t98;
-    let t100 = -t21;
+    let t100 = -t3;
     let t101 = 0.05 * t100;
     let t102 = t1 * t44;
     let t103 = t0 * t44;
@@ -1343,34 +1334,34 @@ pub fn continuous_sensitivity(
     let t232 = t230 + t231;
     let t233 = t208 * t232;
     let t234 = t2 * t45;
-    let t235 = t4 * t234;
-    let t236 = t1 * t3;
+    let t235 = t5 * t234;
+    let t236 = t1 * t4;
     let t237 = t235 + t236;
-    let t238 = t14 * t237;
-    let t239 = t4 * t22;
-    let t240 = t14 * t239;
-    let t241 = -t3;
-    let t242 = t5 * t241;
-    let t243 = t17 + t242;
-    let t244 = t14 * t243;
-    let t245 = t8 * -2.0;
-    let t246 = t8 * 2.0;
-    let t247 = t3 * t234;
-    let t248 = t1 * t4;
+    let t238 = t15 * t237;
+    let t239 = t5 * t22;
+    let t240 = t15 * t239;
+    let t241 = -t4;
+    let t242 = t6 * t241;
+    let t243 = t18 + t242;
+    let t244 = t15 * t243;
+    let t245 = t9 * -2.0;
+    let t246 = t9 * 2.0;
+    let t247 = t4 * t234;
+    let t248 = t1 * t5;
     let t249 = -t248;
     let t250 = t247 + t249;
-    let t251 = t14 * t250;
-    let t252 = t3 * t22;
-    let t253 = t14 * t252;
+    let t251 = t15 * t250;
+    let t252 = t4 * t22;
+    let t253 = t15 * t252;
     let t254 = t0 * t241;
     let t255 = -t254;
-    let t256 = t6 + t255;
-    let t257 = t14 * t256;
-    let t258 = t19 * -2.0;
-    let t259 = t19 * 2.0;
-    let t260 = t13 * t76;
+    let t256 = t7 + t255;
+    let t257 = t15 * t256;
+    let t258 = t20 * -2.0;
+    let t259 = t20 * 2.0;
+    let t260 = t14 * t76;
     let t261 = 0.41666666 * t260;
-    let t262 = t13 * t102;
+    let t262 = t14 * t102;
     let t263 = 0.41666666 * t262;
     let t264 = t22 * -2.0;
     let t265 = t22 * 2.0;
@@ -1389,7 +1380,7 @@ pub fn continuous_sensitivity(
     let t278 = t274 + t277;
     let t279 = t276 + t278;
     let t280 = t273 + t279;
-    let t281 = t21 * t66;
+    let t281 = t3 * t66;
     let t282 = t48 * t76;
     let t283 = t22 * t67;
     let t284 = t282 + t283;
@@ -1867,8 +1858,8 @@ pub fn continuous_sensitivity(
         roll_rate,
         pitch_rate,
         yaw_rate,
-        t15,
-        t20,
+        t16,
+        t21,
         t25,
         t214,
         t226,

@@ -5,15 +5,10 @@
 //! Elementary functions for `no_std` (libm), for `Real` = f64 or f32.
 use crate::Real;
 use libm::Libm;
-/// sin x
+/// (sin x, cos x) with one argument reduction: the same values as [`sin`] and [`cos`].
 #[inline]
-pub fn sin(x: Real) -> Real {
-    Libm::<Real>::sin(x)
-}
-/// cos x
-#[inline]
-pub fn cos(x: Real) -> Real {
-    Libm::<Real>::cos(x)
+pub fn sincos(x: Real) -> (Real, Real) {
+    Libm::<Real>::sincos(x)
 }
 /// √x
 #[inline]

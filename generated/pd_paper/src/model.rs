@@ -5,7 +5,7 @@
 //! Continuous-time model ẋ = f(x, u) and its analytic derivatives.
 #![allow(clippy::all, unused_variables, unused_mut, non_snake_case)]
 use crate::{Real, NU, NX, NZ};
-use crate::math::{cos, sin};
+use crate::math::sincos;
 /// ẋ = f(x, u) with x = [x, y, z, roll, pitch, yaw, vx, vy, vz, roll_rate, pitch_rate, yaw_rate] and u = [u_vz, u_roll, u_pitch, u_yaw_rate].
 pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
     let (
@@ -28,12 +28,9 @@ pub fn continuous_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
         u_yaw_rate,
         ],
     ) = (*x, *u);
-    let t0 = sin(roll);
-    let t1 = cos(roll);
-    let t2 = sin(pitch);
-    let t3 = cos(pitch);
-    let t4 = sin(yaw);
-    let t5 = cos(yaw);
+    let (t0, t1) = sincos(roll);
+    let (t2, t3) = sincos(pitch);
+    let (t4, t5) = sincos(yaw);
     let t6 = t1 * t2;
     let t7 = t5 * t6;
     let t8 = t0 * t4;
@@ -293,12 +290,9 @@ pub fn continuous_jacobians(
     ) = (*x, *u);
     let mut fx = [[0.0; NX]; NX];
     let mut fu = [[0.0; NU]; NX];
-    let t0 = sin(roll);
-    let t1 = cos(roll);
-    let t2 = sin(pitch);
-    let t3 = cos(pitch);
-    let t4 = sin(yaw);
-    let t5 = cos(yaw);
+    let (t0, t1) = sincos(roll);
+    let (t2, t3) = sincos(pitch);
+    let (t4, t5) = sincos(yaw);
     let t6 = t1 * t2;
     let t7 = t5 * t6;
     let t8 = t0 * t4;
@@ -1144,12 +1138,9 @@ pub fn continuous_sensitivity(
         u_yaw_rate,
         ],
     ) = (*x, *u);
-    let t0 = sin(roll);
-    let t1 = cos(roll);
-    let t2 = sin(pitch);
-    let t3 = cos(pitch);
-    let t4 = sin(yaw);
-    let t5 = cos(yaw);
+    let (t0, t1) = sincos(roll);
+    let (t2, t3) = sincos(pitch);
+    let (t4, t5) = sincos(yaw);
     let t6 = t1 * t2;
     let t7 = t5 * t6;
     let t8 = t0 * t4;

@@ -55,7 +55,7 @@ extern "C" {
 
 /* Caller-owned solver storage: an upper bound of the solver's size (sindy_m100_storage_size() returns
  * the exact size) and its alignment. */
-#define SINDY_M100_STORAGE_SIZE 302848
+#define SINDY_M100_STORAGE_SIZE 314368
 #define SINDY_M100_STORAGE_ALIGN 16
 
 typedef double sindy_m100_real;

@@ -84,15 +84,15 @@ pub const STATUS_CODES: &[(&str, i32, &str)] = &[
 /// `<NAME>_STORAGE_SIZE`: an upper bound of the solver state in bytes, from the sizes alone.
 ///
 /// The generator does not compile the crate, so it cannot know `size_of::<Mpc>()` exactly; the
-/// bound counts the solver's arrays (guess, reference, linearisation, condensed QP, the QP's factor
-/// and vectors: 3(N+1)NX + N·NU + N·NX² + N·NX·NU + N·NX + 2·NV² + 12·NV reals, the last 4 NV
-/// spare) plus 8-byte words for index arrays and flags, rounded up to 64. `capi/src/lib.rs`
+/// bound counts the solver's arrays (guess, reference, linearisation, condensing chains, condensed
+/// QP, the QP's factor and vectors: 3(N+1)NX + N·NU + N·NX² + 2·N·NX·NU + N·NX + 2·NV² + 12·NV
+/// reals, the last 4 NV spare) plus 8-byte words for index arrays and flags, rounded up to 64. `capi/src/lib.rs`
 /// asserts at compile time that the solver fits, so a solver that outgrows the bound fails to
 /// build instead of overrunning the caller's buffer; `<name>_storage_size()` returns the exact
 /// size at run time.
 pub fn storage_bound(nx: usize, nu: usize, n: usize, float: Float) -> usize {
     let nv = n * nu;
-    let reals = 3 * (n + 1) * nx + n * nu + n * nx * nx + n * nx * nu + n * nx + 2 * nv * nv + 12 * nv;
+    let reals = 3 * (n + 1) * nx + n * nu + n * nx * nx + 2 * n * nx * nu + n * nx + 2 * nv * nv + 12 * nv;
     let real = match float {
         Float::F64 => 8,
         Float::F32 => 4,

@@ -222,6 +222,29 @@ impl Structure {
         (count(&self.a), count(&self.b))
     }
 
+    /// The order in which `chains_a` overwrites the rows c of Eᵀ (those with a non-zero in some
+    /// chain) and the rows it saves first because a row after them still reads their old value:
+    /// greedily the row with the fewest such readers next (ties: the lowest index).
+    pub fn chain_order(&self) -> (Vec<usize>, Vec<usize>) {
+        let (nx, nu) = (self.nx, self.nu);
+        // Row c of the new Eᵀ reads the old row k if a[k][c] and some lane r of both is non-zero.
+        let reads = |c: usize, k: usize| self.a[k][c] && (0..nu).any(|r| self.e[r][k]);
+        let mut remaining: Vec<usize> = (0..nx).filter(|&c| (0..nu).any(|r| self.e[r][c])).collect();
+        let (mut order, mut saved) = (Vec::new(), Vec::new());
+        while !remaining.is_empty() {
+            let readers = |k: usize, remaining: &[usize]| remaining.iter().filter(|&&c| c != k && reads(c, k)).count();
+            let Some(&next) = remaining.iter().min_by_key(|&&k| readers(k, &remaining)) else {
+                break;
+            };
+            if readers(next, &remaining) > 0 {
+                saved.push(next);
+            }
+            order.push(next);
+            remaining.retain(|&k| k != next);
+        }
+        (order, saved)
+    }
+
     /// Pattern of P A (the intermediate of `at_p_a`).
     fn pa(&self) -> Pattern {
         mul(&self.p, &self.a)
@@ -246,11 +269,14 @@ impl Structure {
             e_b: grid(nu, nu, nx, &|r, c, k| e[r][k] && b[k][c]),
             e_a: grid(nu, nx, nx, &|r, c, k| e[r][k] && a[k][c]),
             pa: grid(nx, nx, nx, &|r, c, k| p[r][k] && a[k][c]),
-            at_pa: grid(nx, nx, nx, &|r, c, k| a[k][r] && pa[k][c]),
+            // Aᵀ P A is symmetric: the upper triangle only (mirrored by `emit`).
+            at_pa: grid(nx, nx, nx, &|r, c, k| c >= r && a[k][r] && pa[k][c]),
             a_x: grid(nx, 1, nx, &|i, _, j| a[i][j]),
             b_x: grid(nx, 1, nu, &|i, _, j| b[i][j]),
             bt_x: grid(nu, 1, nx, &|r, _, k| b[k][r]),
             at_x: grid(nx, 1, nx, &|i, _, k| a[k][i]),
+            chains_a: grid(nx, nu, nx, &|c, r, k| a[k][c] && e[r][k]),
+            chains_b: grid(nu, nu, nx, &|c, r, k| b[k][c] && e[r][k]),
         }
     }
 
@@ -323,7 +349,15 @@ impl Structure {
         let e_b = matrix(&t.e_b, &quote!(out), &|r, c, k| quote!(e[#r][#k] * b[#k][#c]));
         let e_a = matrix(&t.e_a, &quote!(out), &|r, c, k| quote!(e[#r][#k] * a[#k][#c]));
         let pa = matrix(&t.pa, &quote!(t), &|r, c, k| quote!(p[#r][#k] * a[#k][#c]));
-        let at_pa = matrix(&t.at_pa, &quote!(out), &|r, c, k| quote!(a[#k][#r] * t[#k][#c]));
+        let mut at_pa = matrix(&t.at_pa, &quote!(out), &|r, c, k| quote!(a[#k][#r] * t[#k][#c]));
+        for (r, row) in t.at_pa.iter().enumerate() {
+            for (c, terms) in row.iter().enumerate().skip(r + 1) {
+                if !terms.is_empty() {
+                    let (rl, cl) = (ix(r), ix(c));
+                    at_pa.push(quote!(out[#cl][#rl] = out[#rl][#cl];));
+                }
+            }
+        }
         let vector = |grid: &Vec<Vec<Vec<usize>>>,
                       init: &dyn Fn(Literal) -> Option<TokenStream>,
                       factor: &dyn Fn(Literal, Literal) -> TokenStream| {
@@ -337,6 +371,101 @@ impl Structure {
                 })
                 .collect::<Vec<_>>()
         };
+        // One loop over the chains' lanes i per output row c, all NU entries (c, r) in its body.
+        let lanes = |grid: &Vec<Vec<Vec<usize>>>,
+                     c: usize,
+                     keep: &dyn Fn(usize) -> bool,
+                     out: &dyn Fn(Literal) -> TokenStream,
+                     factor: &dyn Fn(Literal, Literal) -> TokenStream| {
+            grid[c]
+                .iter()
+                .enumerate()
+                .filter(|&(r, terms)| !terms.is_empty() || keep(r))
+                .map(|(r, terms)| {
+                    let s = sum(terms, None, &|k| factor(k, ix(r)));
+                    let o = out(ix(r));
+                    quote!(#o = #s;)
+                })
+                .collect::<Vec<_>>()
+        };
+        // In place, one loop over the chains' lanes i per row c of Eᵀ (all its entries (c, r)
+        // in the body), the rows in `chain_order`; a row that a later row still reads is first
+        // copied to `saved` (lane by lane, in the same loop).
+        let (order, saved) = self.chain_order();
+        let saved_slot = |k: usize, r: usize| {
+            saved
+                .iter()
+                .flat_map(|&s| (0..self.nu).filter(move |&r| self.e[r][s]).map(move |r| (s, r)))
+                .position(|x| x == (k, r))
+        };
+        let saved_rows = saved
+            .iter()
+            .map(|&s| (0..self.nu).filter(|&r| self.e[r][s]).count())
+            .sum::<usize>();
+        let chains_a = order
+            .iter()
+            .enumerate()
+            .map(|(position, &c)| {
+                let cl = ix(c);
+                let written = &order[..position];
+                let source = |k: usize, r: usize| -> TokenStream {
+                    let (kl, rl) = (ix(k), ix(r));
+                    match written.contains(&k).then(|| saved_slot(k, r)).flatten() {
+                        Some(slot) => {
+                            let sl = ix(slot);
+                            quote!(saved[#sl][i])
+                        }
+                        None => quote!(w[#kl][#rl][i]),
+                    }
+                };
+                let save = (0..self.nu)
+                    .filter_map(|r| {
+                        let slot = saved.contains(&c).then(|| saved_slot(c, r)).flatten()?;
+                        let (sl, rl) = (ix(slot), ix(r));
+                        Some(quote!(saved[#sl][i] = w[#cl][#rl][i];))
+                    })
+                    .collect::<Vec<_>>();
+                let body = t.chains_a[c]
+                    .iter()
+                    .enumerate()
+                    .filter(|&(r, terms)| !terms.is_empty() || self.e[r][c])
+                    .map(|(r, terms)| {
+                        let rl = ix(r);
+                        let items = terms
+                            .iter()
+                            .map(|&k| {
+                                let (src, kl) = (source(k, r), ix(k));
+                                quote!(#src * a[#kl][#cl])
+                            })
+                            .collect::<Vec<_>>();
+                        let s = if items.is_empty() {
+                            quote!(0.0)
+                        } else {
+                            quote!(#(#items)+*)
+                        };
+                        quote!(w[#cl][#rl][i] = #s;)
+                    })
+                    .collect::<Vec<_>>();
+                quote!(for i in from..N { #(#save)* #(#body)* })
+            })
+            .collect::<Vec<_>>();
+        let saved_len = ix(saved_rows);
+        let chains_b = (0..self.nu)
+            .map(|c| {
+                let cl = ix(c);
+                let body = lanes(
+                    &t.chains_b,
+                    c,
+                    &|_| true,
+                    &|r| quote!(t[#r][i]),
+                    &|k, r| quote!(w[#k][#r][i] * b[#k][#cl]),
+                );
+                quote! {
+                    for i in from..N { #(#body)* }
+                    scatter(&t, j * NU + #cl, from, h);
+                }
+            })
+            .collect::<Vec<_>>();
         let a_x = vector(&t.a_x, &|i| Some(quote!(y[#i])), &|i, j| quote!(a[#i][#j] * x[#j]));
         let b_x = vector(&t.b_x, &|i| Some(quote!(y[#i])), &|i, j| quote!(b[#i][#j] * v[#j]));
         let bt_x = vector(&t.bt_x, &|r| Some(quote!(y[#r])), &|r, k| quote!(b[#k][#r] * p[#k]));
@@ -387,7 +516,7 @@ impl Structure {
             #![doc = #doc]
             #![allow(clippy::all, unused_variables, unused_mut)]
 
-            use crate::{Real, NU, NX};
+            use crate::{Real, N, NU, NV, NX};
 
             /// Structural non-zeros of Aₖ = ∂F/∂x.
             pub const A_PATTERN: [[bool; NX]; NX] = #pa_;
@@ -426,7 +555,49 @@ impl Structure {
                 out
             }
 
-            /// Aᵀ (P A) (P with `P_PATTERN`).
+            /// Every chain of the condensing at once: `w[k][r][i]` is entry (r, k) of the chain Eᵢ
+            /// (NU × NX) of stage i, the stages contiguous (a loop the compiler vectorises).
+            pub type Chains = [[[Real; N]; NU]; NX];
+
+            /// Rows (c, r) of the chains that `chains_a` overwrites while a later row still reads
+            /// them: saved first, lane by lane.
+            pub const SAVED_ROWS: usize = #saved_len;
+
+            /// The workspace of `chains_a`.
+            pub type SavedRows = [[Real; N]; SAVED_ROWS];
+
+            /// Eᵢ ← Eᵢ A in place for the chains i in `from..N` (E with `E_PATTERN`; the terms of
+            /// `e_a`). Entries outside `E_PATTERN` are neither read nor written; `saved` is
+            /// scratch.
+            #[inline(always)]
+            pub fn chains_a(w: &mut Chains, a: &[[Real; NX]; NX], from: usize, saved: &mut SavedRows) {
+                #(#chains_a)*
+            }
+
+            /// H_ij = Eᵢ B_j for the chains i in `from..N` into the condensed Hessian, and
+            /// H_ji = H_ijᵀ (the terms of `e_b`).
+            #[inline(always)]
+            pub fn chains_b(w: &Chains, b: &[[Real; NU]; NX], j: usize, from: usize, h: &mut [[Real; NV]; NV]) {
+                let j = j.min(N - 1);
+                let mut t = [[0.0; N]; NU];
+                #(#chains_b)*
+            }
+
+            /// H[i NU + r][col] = H[col][i NU + r] = t[r][i] for i in `from..N`.
+            #[inline(always)]
+            fn scatter(t: &[[Real; N]; NU], col: usize, from: usize, h: &mut [[Real; NV]; NV]) {
+                let col = col.min(NV - 1);
+                for i in from..N {
+                    for r in 0..NU {
+                        let v = t[r][i];
+                        h[i * NU + r][col] = v;
+                        h[col][i * NU + r] = v;
+                    }
+                }
+            }
+
+            /// Aᵀ (P A) (P with `P_PATTERN`): its upper triangle, mirrored (the result is exactly
+            /// symmetric).
             #[inline(always)]
             pub fn at_p_a(p: &[[Real; NX]; NX], a: &[[Real; NX]; NX]) -> [[Real; NX]; NX] {
                 let mut t = [[0.0; NX]; NX];
@@ -482,6 +653,9 @@ struct Terms {
     b_x: Vec<Vec<Vec<usize>>>,
     bt_x: Vec<Vec<Vec<usize>>>,
     at_x: Vec<Vec<Vec<usize>>>,
+    /// The chains' kernels, per (c, r): the same terms as `e_a`, `e_b` per (r, c).
+    chains_a: Vec<Vec<Vec<usize>>>,
+    chains_b: Vec<Vec<Vec<usize>>>,
 }
 
 #[cfg(test)]
@@ -511,13 +685,14 @@ mod tests {
         assert_eq!(s.e, pat(&[&[1, 1]]));
         let k = s.kernel_flops();
         // Bᵀ P: 2 entries × 2 terms; E B: 2; E A: entry 0 has 1 term (a₁₀ = 0), entry 1 has 2;
-        // P A: 3 + 3 (column 0 skips a₁₀); Aᵀ (PA): row 0 has a₀₀ only, row 1 both: 2 + 4.
-        assert_eq!((k.bt_p, k.e_b, k.e_a, k.at_p_a), (4, 2, 3, 6 + 6));
+        // P A: 3 + 3 (column 0 skips a₁₀); Aᵀ (PA), upper triangle: row 0 has a₀₀ only (2
+        // entries), row 1 both (entry (1, 1)): 2 + 2.
+        assert_eq!((k.bt_p, k.e_b, k.e_a, k.at_p_a), (4, 2, 3, 6 + 4));
         assert_eq!((k.a_x, k.b_x, k.bt_x, k.at_x), (3, 2, 2, 3));
         let dense = Structure::dense(2, 1).kernel_flops();
-        assert_eq!((dense.bt_p, dense.e_b, dense.e_a, dense.at_p_a), (4, 2, 4, 16));
-        // N = 3: 3 (4 + 2) + 3 (3 + 2) + 2 · 12
-        assert_eq!(s.flops(3).condensing, 18 + 15 + 24);
+        assert_eq!((dense.bt_p, dense.e_b, dense.e_a, dense.at_p_a), (4, 2, 4, 8 + 6));
+        // N = 3: 3 (4 + 2) + 3 (3 + 2) + 2 · 10
+        assert_eq!(s.flops(3).condensing, 18 + 15 + 20);
     }
 
     #[test]

@@ -164,15 +164,38 @@ impl<'g> Emitter<'g> {
                     pos
                 }
             }
-            Node::Call(Func::Sin, a) => {
-                let a = self.get(a);
-                self.used_functions.insert("sin");
-                quote!(sin(#a))
-            }
-            Node::Call(Func::Cos, a) => {
-                let a = self.get(a);
-                self.used_functions.insert("cos");
-                quote!(cos(#a))
+            Node::Call(func @ (Func::Sin | Func::Cos), a) => {
+                let arg = self.get(a);
+                let partner = match func {
+                    Func::Sin => Func::Cos,
+                    _ => Func::Sin,
+                };
+                // sin and cos of the same argument: both from one `sincos` (one argument
+                // reduction; the same values as `sin` and `cos`).
+                if let Some(other) = self
+                    .g
+                    .find(Node::Call(partner, a))
+                    .filter(|o| !self.bound.contains_key(o))
+                {
+                    let s = format_ident!("{}{}", self.prefix, self.next);
+                    let c = format_ident!("{}{}", self.prefix, self.next + 1);
+                    self.next += 2;
+                    self.used_functions.insert("sincos");
+                    self.statements.push(quote!(let (#s, #c) = sincos(#arg);));
+                    let (own, other_name) = match func {
+                        Func::Sin => (s, c),
+                        _ => (c, s),
+                    };
+                    self.bound.insert(other, quote!(#other_name));
+                    return quote!(#own);
+                }
+                if matches!(func, Func::Sin) {
+                    self.used_functions.insert("sin");
+                    quote!(sin(#arg))
+                } else {
+                    self.used_functions.insert("cos");
+                    quote!(cos(#arg))
+                }
             }
             Node::Call(Func::Sqrt, a) => {
                 let a = self.get(a);

@@ -67,6 +67,11 @@ impl Graph {
         self.nodes[id.index()]
     }
 
+    /// The node's id if the graph holds it already.
+    pub fn find(&self, node: Node) -> Option<Id> {
+        self.lookup.get(&node).copied()
+    }
+
     pub fn var_count(&self) -> usize {
         self.var_names.len()
     }

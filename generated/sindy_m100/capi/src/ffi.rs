@@ -58,7 +58,7 @@ pub mod status {
 
 /// `<NAME>_STORAGE_SIZE`: an upper bound of [`storage_size`](sindy_m100_storage_size), computed by
 /// the generator from the sizes alone.
-pub const STORAGE_SIZE: usize = 302848;
+pub const STORAGE_SIZE: usize = 314368;
 /// `<NAME>_STORAGE_ALIGN`.
 pub const STORAGE_ALIGN: usize = 16;
 
