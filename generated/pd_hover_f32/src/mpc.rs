@@ -85,8 +85,11 @@ pub struct Mpc {
     v: [Real; NV],
     /// Free response / state step workspace.
     z: [[Real; NX]; N + 1],
-    /// The condensing's chains (`condense`).
+    /// The condensing's chains (`condense`); after it, G = ∂g/∂x₀: `chains[k][r][i]` is
+    /// ∂g_{i NU + r}/∂z₀ₖ = (Mᵢ Aᵢ ⋯ A₀)_{rk}.
     chains: kernels::Chains,
+    /// The gradient at z₀ = x₀ − x̄₀ = 0 (`prepare`); `feedback` adds G z₀.
+    g0: [Real; NV],
     qp: BoxQp<NV>,
     phase: Phase,
 }
@@ -160,6 +163,7 @@ impl Mpc {
             v: [0.0; NV],
             z: [[0.0; NX]; N + 1],
             chains: [[[0.0; N]; NU]; NX],
+            g0: [0.0; NV],
             qp: BoxQp::new(),
             phase: Phase::Stale,
         }
@@ -211,6 +215,7 @@ impl Mpc {
         }
         self.condense();
         self.add_rate_hessian();
+        self.gradient_at_the_guess();
         for k in 0..N {
             for i in 0..NU {
                 self.lo[k * NU + i] = U_MIN[i] - self.us[k][i];
@@ -289,6 +294,42 @@ impl Mpc {
                 for r in 0..NX {
                     p[r][r] += Q[r];
                 }
+            }
+        }
+        kernels::chains_a(&mut self.chains, &self.a[0], 0, &mut saved);
+    }
+    /// g⁰: the condensed gradient at z₀ = 0 (the measurement equal to the guess's x̄₀), by the
+    /// adjoint recursion on the free response z₀ = 0, zₖ₊₁ = Aₖ zₖ + cₖ:
+    /// p_N = Q_N e_N, gⱼ = Bⱼᵀ pⱼ₊₁ + R ūⱼ + S (Δ̄ⱼ − Δ̄ⱼ₊₁), pⱼ = Q eⱼ + Aⱼᵀ pⱼ₊₁, eₖ = x̄ₖ + zₖ − rₖ.
+    fn gradient_at_the_guess(&mut self) {
+        self.z[0] = [0.0; NX];
+        for k in 0..N {
+            self.z[k + 1] = kernels::a_x_add(&self.a[k], &self.z[k], &self.c[k]);
+        }
+        let mut p = [0.0; NX];
+        for i in 0..NX {
+            p[i] = Q_TERMINAL[i] * (self.xs[N][i] + self.z[N][i] - self.reference[N][i]);
+        }
+        for j in (0..N).rev() {
+            let mut ru = [0.0; NU];
+            for r in 0..NU {
+                ru[r] = if is_sent(j, r) {
+                    0.0
+                } else {
+                    let later = if j + 1 < N { self.rate(j + 1, r) } else { 0.0 };
+                    R[r] * self.us[j][r]
+                        + self.rate_weight(r) * (self.rate(j, r) - later)
+                };
+            }
+            let gj = kernels::bt_x_add(&self.b[j], &p, &ru);
+            self.g0[j * NU..(j + 1) * NU].copy_from_slice(&gj);
+            if j > 0 {
+                let mut next = kernels::at_x(&self.a[j], &p);
+                for i in 0..NX {
+                    next[i]
+                        += Q[i] * (self.xs[j][i] + self.z[j][i] - self.reference[j][i]);
+                }
+                p = next;
             }
         }
     }
@@ -417,33 +458,14 @@ impl Mpc {
         for i in 0..NX {
             self.z[0][i] = x0[i] - self.xs[0][i];
         }
-        for k in 0..N {
-            self.z[k + 1] = kernels::a_x_add(&self.a[k], &self.z[k], &self.c[k]);
-        }
-        let mut p = [0.0; NX];
-        for i in 0..NX {
-            p[i] = Q_TERMINAL[i] * (self.xs[N][i] + self.z[N][i] - self.reference[N][i]);
-        }
-        for j in (0..N).rev() {
-            let mut ru = [0.0; NU];
+        self.g = self.g0;
+        for k in 0..NX {
+            let zk = self.z[0][k];
             for r in 0..NU {
-                ru[r] = if is_sent(j, r) {
-                    0.0
-                } else {
-                    let later = if j + 1 < N { self.rate(j + 1, r) } else { 0.0 };
-                    R[r] * self.us[j][r]
-                        + self.rate_weight(r) * (self.rate(j, r) - later)
-                };
-            }
-            let gj = kernels::bt_x_add(&self.b[j], &p, &ru);
-            self.g[j * NU..(j + 1) * NU].copy_from_slice(&gj);
-            if j > 0 {
-                let mut next = kernels::at_x(&self.a[j], &p);
-                for i in 0..NX {
-                    next[i]
-                        += Q[i] * (self.xs[j][i] + self.z[j][i] - self.reference[j][i]);
+                let column = &self.chains[k][r];
+                for i in 0..N {
+                    self.g[i * NU + r] += column[i] * zk;
                 }
-                p = next;
             }
         }
         self.v = [0.0; NV];

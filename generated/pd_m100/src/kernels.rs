@@ -7,7 +7,7 @@
 Structural non-zeros: Aₖ 78 of 144, Bₖ 42 of 48, every Pᵢ 126 of 144, every chain E 48 of 48.
 
 Multiply-adds per call: Bᵀ P 433, E B 168, E A 312, Aᵀ P A 1155, A x 78, B v 42, Bᵀ p 42, Aᵀ p 78.
-Per RTI step (N = 30): condensing 260325 (dense 434376), feedback 9462 (dense 15696), Cholesky of the condensed Hessian with every input free 288000 (dense 288000; input components [0, 0, 0, 0]).*/
+Per RTI step (N = 30): condensing 275547 (dense 461592), feedback 5040 (dense 7200), Cholesky of the condensed Hessian with every input free 288000 (dense 288000; input components [0, 0, 0, 0]).*/
 #![allow(clippy::all, unused_variables, unused_mut)]
 use crate::{Real, N, NU, NV, NX};
 /// Structural non-zeros of Aₖ = ∂F/∂x.

@@ -7,7 +7,7 @@
 Structural non-zeros: Aₖ 60 of 144, Bₖ 28 of 48, every Pᵢ 96 of 144, every chain E 32 of 48.
 
 Multiply-adds per call: Bᵀ P 240, E B 80, E A 174, Aᵀ P A 773, A x 60, B v 28, Bᵀ p 28, Aᵀ p 60.
-Per RTI step (N = 30): condensing 142507 (dense 434376), feedback 7020 (dense 15696), Cholesky of the condensed Hessian with every input free 126000 (dense 288000; input components [1, 0, 0, 0]).*/
+Per RTI step (N = 30): condensing 152107 (dense 461592), feedback 4080 (dense 7200), Cholesky of the condensed Hessian with every input free 126000 (dense 288000; input components [1, 0, 0, 0]).*/
 #![allow(clippy::all, unused_variables, unused_mut)]
 use crate::{Real, N, NU, NV, NX};
 /// Structural non-zeros of Aₖ = ∂F/∂x.

@@ -16,11 +16,11 @@ use std::path::Path;
 pub struct StepWork {
     /// RK4 sensitivities of the N stages (`prepare`).
     pub linearisation: usize,
-    /// Condensing: P, E·A chains, H blocks (`prepare`).
+    /// Condensing: P, E·A chains, H blocks, G = ∂g/∂x₀ and the gradient at the guess (`prepare`).
     pub condensing: usize,
     /// Cholesky of H with every input free (`prepare`; an upper bound, fixed inputs make it smaller).
     pub cholesky: usize,
-    /// Free response, adjoint and guess update (`feedback`, without the QP's iterations).
+    /// g = g⁰ + G z₀ and the guess update (`feedback`, without the QP's iterations).
     pub feedback: usize,
 }
 

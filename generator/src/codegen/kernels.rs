@@ -83,9 +83,10 @@ pub struct KernelFlops {
 /// Multiply-adds per RTI step of the stage-matrix work (horizon N), by part.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StepFlops {
-    /// Condensing: N (Bᵀ P + M B) + N(N−1)/2 (E A + E B) + (N−1) Aᵀ P A.
+    /// Condensing: N (Bᵀ P + M B) + N(N−1)/2 (E A + E B) + (N−1) Aᵀ P A, then G = ∂g/∂x₀ (N more
+    /// E A) and the gradient g⁰ at the guess: free response N·A x, adjoint N·Bᵀ p + (N−1)·Aᵀ p.
     pub condensing: usize,
-    /// Feedback: free response N·A x, adjoint N·Bᵀ p + (N−1)·Aᵀ p, guess update N (A x + B v).
+    /// Feedback: g = g⁰ + G z₀ (N·NU·NX) and the guess update N (A x + B v).
     pub feedback: usize,
     /// Cholesky factorisation of the condensed Hessian with every input free, Σ n³/6 over the
     /// components of [`Structure::input_components`] (n = N × the component's inputs): the upper
@@ -301,8 +302,17 @@ impl Structure {
         let k = self.kernel_flops();
         let chains = n * n.saturating_sub(1) / 2;
         StepFlops {
-            condensing: n * (k.bt_p + k.e_b) + chains * (k.e_a + k.e_b) + n.saturating_sub(1) * k.at_p_a,
-            feedback: n * k.a_x + n * k.bt_x + n.saturating_sub(1) * k.at_x + n * (k.a_x + k.b_x),
+            // … + the chains carried through A₀ (G = ∂g/∂x₀) + the gradient at the guess (free
+            // response from z₀ = 0 and the adjoint sweep).
+            condensing: n * (k.bt_p + k.e_b)
+                + chains * (k.e_a + k.e_b)
+                + n.saturating_sub(1) * k.at_p_a
+                + n * k.e_a
+                + n * k.a_x
+                + n * k.bt_x
+                + n.saturating_sub(1) * k.at_x,
+            // g = g⁰ + G z₀ (dense, N·NU·NX) and the guess update.
+            feedback: n * self.nu * self.nx + n * (k.a_x + k.b_x),
             cholesky: {
                 let components = self.input_components();
                 (0..self.nu)
@@ -691,8 +701,10 @@ mod tests {
         assert_eq!((k.a_x, k.b_x, k.bt_x, k.at_x), (3, 2, 2, 3));
         let dense = Structure::dense(2, 1).kernel_flops();
         assert_eq!((dense.bt_p, dense.e_b, dense.e_a, dense.at_p_a), (4, 2, 4, 8 + 6));
-        // N = 3: 3 (4 + 2) + 3 (3 + 2) + 2 · 10
-        assert_eq!(s.flops(3).condensing, 18 + 15 + 20);
+        // N = 3: 3 (4 + 2) + 3 (3 + 2) + 2 · 10, then G: 3 · 3, g⁰: 3 · 3 + 3 · 2 + 2 · 3
+        assert_eq!(s.flops(3).condensing, 18 + 15 + 20 + 9 + 9 + 6 + 6);
+        // g⁰ + G z₀: 3 · 1 · 2; the guess update 3 (3 + 2)
+        assert_eq!(s.flops(3).feedback, 6 + 15);
     }
 
     #[test]
