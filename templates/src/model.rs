@@ -1,5 +1,5 @@
 //! Example model for the template's own tests (the generator emits its own
-//! `model` module with these three functions).
+//! `model` module with these functions).
 //!
 //! Damped oscillator: ẋ₀ = x₁, ẋ₁ = −K x₀ − C x₁ + B u.
 
@@ -29,6 +29,17 @@ pub fn continuous_sensitivity(x: &[Real; NX], u: &[Real; NU], s: &[[Real; NZ]; N
     }
     ds[1][NX] += B;
     (f, ds)
+}
+
+/// [`continuous_sensitivity`] at S = [I 0] (the first stage of a sample): (f(x, u), [∂f/∂x ∂f/∂u]).
+pub fn continuous_sensitivity_at_identity(x: &[Real; NX], u: &[Real; NU]) -> ([Real; NX], [[Real; NZ]; NX]) {
+    let (fx, fu) = continuous_jacobians(x, u);
+    let mut ds = [[0.0; NZ]; NX];
+    for i in 0..NX {
+        ds[i][..NX].copy_from_slice(&fx[i]);
+        ds[i][NX..].copy_from_slice(&fu[i]);
+    }
+    (continuous_dynamics(x, u), ds)
 }
 
 /// Structural non-zeros of every sensitivity S = ∂x/∂(x₀, u) of the RK4 recursion (the generator

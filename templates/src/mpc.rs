@@ -5,7 +5,7 @@
 use crate::kernels;
 use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
-use crate::rk4::{discrete_dynamics, discrete_linearization, hold_sent_inputs, input_to_send, is_sent};
+use crate::rk4::{discrete_dynamics, discrete_linearization_into, hold_sent_inputs, input_to_send, is_sent};
 use crate::{
     Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, R_DELTA,
     TRUST_BOUND, U_MAX, U_MIN,
@@ -265,17 +265,17 @@ impl Mpc {
         let rollout = !self.xs[1..].iter().all(within_trust_region);
         let mut finite = true;
         for k in 0..N {
-            let (next, a, b) = discrete_linearization(&self.xs[k], &self.us[k]);
+            let next = discrete_linearization_into(&self.xs[k], &self.us[k], &mut self.a[k], &mut self.b[k]);
             if rollout {
                 self.xs[k + 1] = into_trust_region(&next);
             }
             for i in 0..NX {
                 self.c[k][i] = next[i] - self.xs[k + 1][i];
             }
-            self.a[k] = a;
-            self.b[k] = b;
+            finite &= all_finite(&self.c[k])
+                && self.a[k].iter().all(|r| all_finite(r))
+                && self.b[k].iter().all(|r| all_finite(r));
             hold_sent_inputs(k, &mut self.b[k]);
-            finite &= all_finite(&self.c[k]) && a.iter().all(|r| all_finite(r)) && b.iter().all(|r| all_finite(r));
         }
         finite
     }

@@ -1,6 +1,8 @@
 //! Explicit RK4 with `SUBSTEPS` substeps per sample and forward sensitivities.
 
-use crate::model::{continuous_dynamics, continuous_sensitivity, sensitivity_axpy, sensitivity_step};
+use crate::model::{
+    continuous_dynamics, continuous_sensitivity, continuous_sensitivity_at_identity, sensitivity_axpy, sensitivity_step,
+};
 use crate::{Real, DT, INPUT_LEAD, N, NU, NX, NZ, SUBSTEPS};
 
 /// Substep length h = DT / M.
@@ -47,13 +49,32 @@ pub fn discrete_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
 /// This is the exact derivative of [`discrete_dynamics`].
 #[allow(clippy::type_complexity)]
 pub fn discrete_linearization(x: &[Real; NX], u: &[Real; NU]) -> ([Real; NX], [[Real; NX]; NX], [[Real; NU]; NX]) {
+    let mut a = [[0.0; NX]; NX];
+    let mut b = [[0.0; NU]; NX];
+    let next = discrete_linearization_into(x, u, &mut a, &mut b);
+    (next, a, b)
+}
+
+/// [`discrete_linearization`] writing A and B in place (the solvers' stage matrices, no copies):
+/// returns x⁺.
+pub fn discrete_linearization_into(
+    x: &[Real; NX],
+    u: &[Real; NU],
+    a: &mut [[Real; NX]; NX],
+    b: &mut [[Real; NU]; NX],
+) -> [Real; NX] {
     let mut xk = *x;
     let mut s = [[0.0; NZ]; NX];
     for (i, row) in s.iter_mut().enumerate() {
         row[i] = 1.0;
     }
-    for _ in 0..SUBSTEPS {
-        let (k1, d1) = continuous_sensitivity(&xk, u, &s);
+    for step in 0..SUBSTEPS {
+        // S = [I 0] at the start of the sample: the first stage needs no products.
+        let (k1, d1) = if step == 0 {
+            continuous_sensitivity_at_identity(&xk, u)
+        } else {
+            continuous_sensitivity(&xk, u, &s)
+        };
         let (k2, d2) = continuous_sensitivity(&axpy(&xk, 0.5 * H, &k1), u, &sensitivity_axpy(&s, 0.5 * H, &d1));
         let (k3, d3) = continuous_sensitivity(&axpy(&xk, 0.5 * H, &k2), u, &sensitivity_axpy(&s, 0.5 * H, &d2));
         let (k4, d4) = continuous_sensitivity(&axpy(&xk, H, &k3), u, &sensitivity_axpy(&s, H, &d3));
@@ -62,13 +83,11 @@ pub fn discrete_linearization(x: &[Real; NX], u: &[Real; NU]) -> ([Real; NX], [[
         }
         sensitivity_step(&mut s, H / 6.0, &d1, &d2, &d3, &d4);
     }
-    let mut a = [[0.0; NX]; NX];
-    let mut b = [[0.0; NU]; NX];
     for i in 0..NX {
         a[i].copy_from_slice(&s[i][..NX]);
         b[i].copy_from_slice(&s[i][NX..]);
     }
-    (xk, a, b)
+    xk
 }
 
 /// (A, B) of [`discrete_linearization`].

@@ -4,7 +4,8 @@
 // mpc: q=[2.0, 2.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] q_terminal=[2.0, 2.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] r=[0.1, 0.1, 0.1, 10.0] r_delta=[0.0, 50.0, 50.0, 0.0] u_min=[-5.0, -0.611, -0.611, -2.6179938779914944] u_max=[5.0, 0.611, 0.611, 2.6179938779914944] max_qp_iterations=200 max_ipm_iterations=30 regularisation=1e-9
 //! Explicit RK4 with `SUBSTEPS` substeps per sample and forward sensitivities.
 use crate::model::{
-    continuous_dynamics, continuous_sensitivity, sensitivity_axpy, sensitivity_step,
+    continuous_dynamics, continuous_sensitivity, continuous_sensitivity_at_identity,
+    sensitivity_axpy, sensitivity_step,
 };
 use crate::{Real, DT, INPUT_LEAD, N, NU, NX, NZ, SUBSTEPS};
 /// Substep length h = DT / M.
@@ -50,13 +51,30 @@ pub fn discrete_linearization(
     x: &[Real; NX],
     u: &[Real; NU],
 ) -> ([Real; NX], [[Real; NX]; NX], [[Real; NU]; NX]) {
+    let mut a = [[0.0; NX]; NX];
+    let mut b = [[0.0; NU]; NX];
+    let next = discrete_linearization_into(x, u, &mut a, &mut b);
+    (next, a, b)
+}
+/// [`discrete_linearization`] writing A and B in place (the solvers' stage matrices, no copies):
+/// returns x⁺.
+pub fn discrete_linearization_into(
+    x: &[Real; NX],
+    u: &[Real; NU],
+    a: &mut [[Real; NX]; NX],
+    b: &mut [[Real; NU]; NX],
+) -> [Real; NX] {
     let mut xk = *x;
     let mut s = [[0.0; NZ]; NX];
     for (i, row) in s.iter_mut().enumerate() {
         row[i] = 1.0;
     }
-    for _ in 0..SUBSTEPS {
-        let (k1, d1) = continuous_sensitivity(&xk, u, &s);
+    for step in 0..SUBSTEPS {
+        let (k1, d1) = if step == 0 {
+            continuous_sensitivity_at_identity(&xk, u)
+        } else {
+            continuous_sensitivity(&xk, u, &s)
+        };
         let (k2, d2) = continuous_sensitivity(
             &axpy(&xk, 0.5 * H, &k1),
             u,
@@ -77,13 +95,11 @@ pub fn discrete_linearization(
         }
         sensitivity_step(&mut s, H / 6.0, &d1, &d2, &d3, &d4);
     }
-    let mut a = [[0.0; NX]; NX];
-    let mut b = [[0.0; NU]; NX];
     for i in 0..NX {
         a[i].copy_from_slice(&s[i][..NX]);
         b[i].copy_from_slice(&s[i][NX..]);
     }
-    (xk, a, b)
+    xk
 }
 /// (A, B) of [`discrete_linearization`].
 #[allow(clippy::type_complexity)]

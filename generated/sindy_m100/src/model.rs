@@ -332,6 +332,135 @@ pub fn continuous_sensitivity(
     ds[11][15] += 2.3575152767690373;
     (f, ds)
 }
+/// [`continuous_sensitivity`] at S = [I 0] (the first stage of a sample): (f(x, u),
+/// [∂f/∂x ∂f/∂u]), the derivatives written where the product would have summed them with
+/// zeros.
+pub fn continuous_sensitivity_at_identity(
+    x: &[Real; NX],
+    u: &[Real; NU],
+) -> ([Real; NX], [[Real; NZ]; NX]) {
+    let (
+        [x,
+        y,
+        z,
+        roll,
+        pitch,
+        yaw,
+        vx,
+        vy,
+        vz,
+        roll_rate,
+        pitch_rate,
+        yaw_rate,
+        ],
+        [u_vz,
+        u_roll,
+        u_pitch,
+        u_yaw_rate,
+        ],
+    ) = (*x, *u);
+    let (t0, t1) = sincos(yaw);
+    let (t2, t3) = sincos(roll);
+    let t4 = t0 * t2;
+    let (t5, t6) = sincos(pitch);
+    let t7 = t1 * t5;
+    let t8 = vx * -0.1268534870930643;
+    let t9 = t4 * 10.757258021845415;
+    let t10 = t7 * 10.15014241216052;
+    let t11 = t8 + t9;
+    let t12 = t10 + t11;
+    let t13 = t1 * t2;
+    let t14 = t0 * t5;
+    let t15 = vy * -0.1191707138065488;
+    let t16 = t13 * -10.340073533868845;
+    let t17 = t14 * 10.197594541317072;
+    let t18 = t15 + t16;
+    let t19 = t17 + t18;
+    let t20 = vz * -3.350808898298931;
+    let t21 = u_vz * 3.3510259723375704;
+    let t22 = t20 + t21;
+    let t23 = u_roll * t0;
+    let t24 = roll * -12.006452160955016;
+    let t25 = roll_rate * -2.4644308562587396;
+    let t26 = u_roll * 9.8090134618109;
+    let t27 = t23 * 2.3272083051047705;
+    let t28 = t4 * -3.938699282494554;
+    let t29 = t24 + t25;
+    let t30 = t26 + t29;
+    let t31 = t27 + t30;
+    let t32 = t28 + t31;
+    let t33 = roll * u_yaw_rate;
+    let t34 = pitch * -32.26943351362244;
+    let t35 = pitch_rate * -5.718542068343195;
+    let t36 = u_pitch * 30.812126210604678;
+    let t37 = t33 * 8.11564742486721;
+    let t38 = t34 + t35;
+    let t39 = t36 + t38;
+    let t40 = t37 + t39;
+    let t41 = roll_rate * -1.1251034350004208;
+    let t42 = yaw_rate * -2.691318507200475;
+    let t43 = u_yaw_rate * 2.3575152767690373;
+    let t44 = t41 + t42;
+    let t45 = t43 + t44;
+    let t46 = t3 * t0;
+    let t47 = 10.757258021845415 * t46;
+    let t48 = t6 * t1;
+    let t49 = 10.15014241216052 * t48;
+    let t50 = -t0;
+    let t51 = t5 * t50;
+    let t52 = t13 * 10.757258021845415;
+    let t53 = 10.15014241216052 * t51;
+    let t54 = t52 + t53;
+    let t55 = t3 * t1;
+    let t56 = -10.340073533868845 * t55;
+    let t57 = t6 * t0;
+    let t58 = 10.197594541317072 * t57;
+    let t59 = t2 * t50;
+    let t60 = -10.340073533868845 * t59;
+    let t61 = t7 * 10.197594541317072;
+    let t62 = t60 + t61;
+    let t63 = -3.938699282494554 * t46;
+    let t64 = -12.006452160955016 + t63;
+    let t65 = u_roll * t1;
+    let t66 = t65 * 2.3272083051047705;
+    let t67 = t13 * -3.938699282494554;
+    let t68 = t66 + t67;
+    let t69 = t0 * 2.3272083051047705;
+    let t70 = 9.8090134618109 + t69;
+    let t71 = u_yaw_rate * 8.11564742486721;
+    let t72 = roll * 8.11564742486721;
+    let f = [vx, vy, vz, roll_rate, pitch_rate, yaw_rate, t12, t19, t22, t32, t40, t45];
+    let mut ds = [[0.0; NZ]; NX];
+    ds[0][6] = 1.0;
+    ds[1][7] = 1.0;
+    ds[2][8] = 1.0;
+    ds[3][9] = 1.0;
+    ds[4][10] = 1.0;
+    ds[5][11] = 1.0;
+    ds[6][3] = t47;
+    ds[6][4] = t49;
+    ds[6][5] = t54;
+    ds[6][6] = -0.1268534870930643;
+    ds[7][3] = t56;
+    ds[7][4] = t58;
+    ds[7][5] = t62;
+    ds[7][7] = -0.1191707138065488;
+    ds[8][8] = -3.350808898298931;
+    ds[8][12] = 3.3510259723375704;
+    ds[9][3] = t64;
+    ds[9][5] = t68;
+    ds[9][9] = -2.4644308562587396;
+    ds[9][13] = t70;
+    ds[10][3] = t71;
+    ds[10][4] = -32.26943351362244;
+    ds[10][10] = -5.718542068343195;
+    ds[10][14] = 30.812126210604678;
+    ds[10][15] = t72;
+    ds[11][9] = -1.1251034350004208;
+    ds[11][11] = -2.691318507200475;
+    ds[11][15] = 2.3575152767690373;
+    (f, ds)
+}
 /// Structural non-zeros of every sensitivity S = ∂x/∂(x₀, u) of the RK4 recursion (the
 /// generator's propagation of the Jacobian pattern; S = [A B] at the end of a sample).
 #[allow(dead_code)]

@@ -66,11 +66,13 @@ pub struct SensitivityFlops {
 }
 
 impl SensitivityFlops {
-    /// Per RTI step: N samples × `substeps` × (4 stages + the combinations).
+    /// Per RTI step: N samples × `substeps` × (4 stages + the combinations), less one stage per
+    /// sample in the emitted code (its first stage is at S = [I 0]: no products,
+    /// `continuous_sensitivity_at_identity`).
     pub fn per_step(&self, horizon: usize, substeps: usize) -> (usize, usize) {
         let n = horizon * substeps;
         (
-            n * (4 * self.stage + self.combine),
+            n * (4 * self.stage + self.combine) - horizon * self.stage,
             n * (4 * self.stage_dense + self.combine_dense),
         )
     }
@@ -177,6 +179,30 @@ pub fn emit(
     }
     em.check()?;
     let s_stmts = em.take_statements();
+
+    // continuous_sensitivity_at_identity: the same at S = [I 0] (the first stage of a sample),
+    // where ∂f/∂x · S + ∂f/∂u · [0 I] = [∂f/∂x ∂f/∂u]: the derivatives themselves, no products.
+    let mut em = Emitter::new(g, bind_variables(ir).1, float);
+    let f0_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
+    let mut first = Vec::new();
+    for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {
+        let ii = index(i);
+        for (k, &d) in rx
+            .iter()
+            .enumerate()
+            .chain(ru.iter().enumerate().map(|(m, d)| (ir.nx + m, d)))
+        {
+            if !g.is_zero(d) {
+                let a = em.atom(d);
+                let kk = index(k);
+                first.push(quote!(ds[#ii][#kk] = #a;));
+            }
+        }
+    }
+    em.check()?;
+    let first_stmts = em.take_statements();
+    used.extend(em.used_functions());
+
     let entries: Vec<(proc_macro2::Literal, proc_macro2::Literal)> = (0..ir.nx)
         .flat_map(|i| {
             (0..nz_count)
@@ -232,6 +258,18 @@ pub fn emit(
             let f = [#(#sf_atoms),*];
             let mut ds = [[0.0; NZ]; NX];
             #(#rows)*
+            (f, ds)
+        }
+
+        /// [`continuous_sensitivity`] at S = [I 0] (the first stage of a sample): (f(x, u),
+        /// [∂f/∂x ∂f/∂u]), the derivatives written where the product would have summed them with
+        /// zeros.
+        pub fn continuous_sensitivity_at_identity(x: &[Real; NX], u: &[Real; NU]) -> ([Real; NX], [[Real; NZ]; NX]) {
+            #binding
+            #(#first_stmts)*
+            let f = [#(#f0_atoms),*];
+            let mut ds = [[0.0; NZ]; NX];
+            #(#first)*
             (f, ds)
         }
 
