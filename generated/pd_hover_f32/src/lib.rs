@@ -28,6 +28,7 @@ mod rk4;
 pub use dims::*;
 pub use model::{continuous_dynamics, continuous_jacobians};
 pub use mpc::{Mpc, Solution, Status};
+pub use rk4::discrete_linearization_into;
 pub use rk4::{discrete_dynamics, discrete_jacobians, discrete_linearization};
 /// State names, in state order.
 pub const STATE_NAMES: [&str; NX] = [
