@@ -395,7 +395,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             "channels": channels,
         });
         if let Some(r) = refined {
-            provenance["input_response"]["refined_over_the_horizon"] = refinement_json(r);
+            provenance["input_response"]["refined_over_the_horizon"] = refinement_json(r, &RefineOptions::default());
         }
     }
     let json = match args.method {
@@ -477,10 +477,6 @@ fn constant_log(log: &uavgen::logs::FlightLog) -> bool {
 /// The ridge weights `identify` tries in turn without --alpha (docs/sindy.md, "Ridge ladder").
 const RIDGE_LADDER: [f64; 3] = [1e-3, 1e-2, 1e-1];
 
-/// The SINDy fit of `identify`: the sweep, selection by the criterion, then rows moved to sparser
-/// values until one MPC horizon stays bounded; without --alpha the ridge ladder is climbed until
-/// that succeeds (if no rung does, the one with the fewest unbounded trials is kept, for the
-/// caller's check to report).
 /// The PD fit's options of `args`.
 fn pd_options(args: &IdentifyArgs) -> Result<PdFitOptions, String> {
     check_positive("mass", args.mass)?;
@@ -510,12 +506,13 @@ fn refine_delays(
     let options = RefineOptions::default();
     let splits: Vec<_> = [HeldOut::Tail, HeldOut::Head]
         .into_iter()
-        .map(|end| horizon_delay::split_logs(logs, options.train_share, REFINE_MIN_ROWS, end))
+        .map(|end| horizon_delay::split_logs(logs, options.train_share, options.min_rows, end))
         .collect();
     if splits.iter().any(|(_, test)| test.is_empty()) {
         eprintln!(
-            "  delays not refined over the horizon: no segment is long enough to hold out {:.0} % of it ({REFINE_MIN_ROWS} rows; the one-step delays are kept)",
-            100.0 * (1.0 - options.train_share)
+            "  delays not refined over the horizon: no segment is long enough to hold out {:.0} % of it ({} rows; the one-step delays are kept)",
+            100.0 * (1.0 - options.train_share),
+            options.min_rows
         );
         return None;
     }
@@ -575,22 +572,15 @@ fn refine_delays(
     refined
 }
 
-/// Rows each side of the split a segment needs to be held out in part.
-const REFINE_MIN_ROWS: usize = 90;
-
 /// The median sample period over every segment of `logs`.
 fn median_period(logs: &[uavgen::logs::FlightLog]) -> Option<f64> {
-    let mut steps: Vec<f64> = logs
+    let steps: Vec<f64> = logs
         .iter()
         .flat_map(|l| &l.segments)
         .flat_map(|s| s.t.windows(2).map(|w| w[1] - w[0]))
         .filter(|d| d.is_finite() && *d > 0.0)
         .collect();
-    if steps.is_empty() {
-        return None;
-    }
-    steps.sort_by(f64::total_cmp);
-    Some(steps[steps.len() / 2])
+    uavgen::logs::median(&steps)
 }
 
 /// The model `identify` would fit on `logs` with the input response `r`, quietly and without the
@@ -629,8 +619,8 @@ fn candidate_model(
     uavgen::model::parse(&text, "candidate model").ok()
 }
 
-/// report of the refinement for the model's provenance.
-fn refinement_json(r: &horizon_delay::Refinement) -> serde_json::Value {
+/// The refinement (made with `options`) for the model's provenance.
+fn refinement_json(r: &horizon_delay::Refinement, options: &RefineOptions) -> serde_json::Value {
     let channels: serde_json::Map<String, serde_json::Value> = r
         .channels
         .iter()
@@ -646,7 +636,7 @@ fn refinement_json(r: &horizon_delay::Refinement) -> serde_json::Value {
         })
         .collect();
     serde_json::json!({
-        "held_out": format!("the first and the last {:.0} % of every segment in turn", 100.0 * (1.0 - RefineOptions::default().train_share)),
+        "held_out": format!("the first and the last {:.0} % of every segment in turn", 100.0 * (1.0 - options.train_share)),
         "score": "the worse held-out part's horizon RMSE relative to the one-step delays'",
         "score_before_after": [r.before, r.after],
         "channels": channels,
@@ -698,6 +688,10 @@ fn sindy_options(args: &IdentifyArgs, alpha: f64, sweep: Option<Vec<f64>>) -> Si
     }
 }
 
+/// The SINDy fit of `identify`: the sweep, selection by the criterion, then rows moved to sparser
+/// values until one MPC horizon stays bounded; without --alpha the ridge ladder is climbed until
+/// that succeeds (if no rung does, the one with the fewest unbounded trials is kept, for the
+/// caller's check to report).
 fn fit_sindy(
     args: &IdentifyArgs,
     dataset: &uavgen::identify::dataset::Dataset,

@@ -123,7 +123,7 @@ pub fn emit(
     used.extend(em.used_functions());
 
     // continuous_sensitivity: f and ∂f/∂x·S + ∂f/∂u·[0 I] sharing one DAG walk.
-    let mut em = Emitter::new(g, vars, float);
+    let mut em = Emitter::new(g, vars.clone(), float);
     let sf_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
     let mut rows = Vec::new();
     for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {
@@ -182,7 +182,7 @@ pub fn emit(
 
     // continuous_sensitivity_at_identity: the same at S = [I 0] (the first stage of a sample),
     // where ∂f/∂x · S + ∂f/∂u · [0 I] = [∂f/∂x ∂f/∂u]: the derivatives themselves, no products.
-    let mut em = Emitter::new(g, bind_variables(ir).1, float);
+    let mut em = Emitter::new(g, vars, float);
     let f0_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
     let mut first = Vec::new();
     for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {

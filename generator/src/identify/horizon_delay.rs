@@ -43,10 +43,13 @@ pub struct RefineOptions {
     pub min_gain: f64,
     /// Share of every segment fitted; the rest is held out.
     pub train_share: f64,
+    /// Rows each part of a split segment needs (else the segment is fitted whole).
+    pub min_rows: usize,
 }
 
 impl Default for RefineOptions {
-    /// One sample below to two above in half samples, 0 … 0.5 s, a 1 % gain, 80 % fitted.
+    /// One sample below to two above in half samples, 0 … 0.5 s, a 5 % gain, 80 % fitted, parts
+    /// of at least 90 rows (3 s at 30 Hz: three horizons).
     fn default() -> Self {
         Self {
             below: 2,
@@ -54,6 +57,7 @@ impl Default for RefineOptions {
             max_delay: 0.5,
             min_gain: 0.05,
             train_share: 0.8,
+            min_rows: 90,
         }
     }
 }
@@ -82,14 +86,11 @@ pub struct Refinement {
 
 /// The candidate delays of one channel around `d1` (sorted, distinct, within 0 … max_delay).
 pub fn candidates(d1: f64, dt: f64, options: &RefineOptions) -> Vec<f64> {
+    // Below 0 the grid is clipped to 0 (kept once by the dedup).
     let mut out: Vec<f64> = (-(options.below as i64)..=options.above as i64)
-        .map(|k| d1 + k as f64 * dt / 2.0)
-        .filter(|d| *d >= -1e-12 && *d <= options.max_delay + 1e-12)
-        .map(|d| d.max(0.0))
+        .map(|k| (d1 + k as f64 * dt / 2.0).max(0.0))
+        .filter(|d| *d <= options.max_delay + 1e-12)
         .collect();
-    if d1 > 0.0 && !out.contains(&0.0) && d1 - options.below as f64 * dt / 2.0 < 0.0 {
-        out.push(0.0);
-    }
     out.sort_by(f64::total_cmp);
     out.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
     out
@@ -111,7 +112,7 @@ pub fn refine(
         let d1 = current.delay[j];
         let mut scores = Vec::new();
         let mut choice = (d1, best);
-        let mut try_delay = |d: f64, scores: &mut Vec<(f64, f64)>| {
+        let mut try_delay = |d: f64| {
             let s = if (d - d1).abs() < 1e-12 {
                 best
             } else {
@@ -124,7 +125,7 @@ pub fn refine(
         };
         let grid = candidates(d1, dt, options);
         for &d in &grid {
-            let s = try_delay(d, &mut scores);
+            let s = try_delay(d);
             if s < choice.1 {
                 choice = (d, s);
             }
@@ -139,7 +140,7 @@ pub fn refine(
                 if d < -1e-12 || d > options.max_delay + 1e-12 {
                     break;
                 }
-                let s = try_delay(d.max(0.0), &mut scores);
+                let s = try_delay(d.max(0.0));
                 if s >= choice.1 {
                     break;
                 }
