@@ -19,6 +19,7 @@ pub struct MpcOptionsFile {
     pub u_min: Option<Vec<f64>>,
     pub u_max: Option<Vec<f64>>,
     pub max_qp_iterations: Option<usize>,
+    pub max_qp_work: Option<usize>,
     pub max_ipm_iterations: Option<usize>,
     pub regularisation: Option<f64>,
 }
@@ -38,6 +39,9 @@ pub struct MpcOptions {
     pub u_max: Vec<f64>,
     /// Hard cap on active-set iterations per QP (`--qp condensed`).
     pub max_qp_iterations: usize,
+    /// Work budget of one QP in multiply-adds (`--qp condensed`; None: NV³ = (N·NU)³, six full
+    /// factorisations of the condensed Hessian). docs/mpc.md, "The work budget".
+    pub max_qp_work: Option<usize>,
     /// Hard cap on interior-point iterations per QP (`--qp riccati`).
     pub max_ipm_iterations: usize,
     /// Added to the condensed Hessian's diagonal.
@@ -106,6 +110,12 @@ fn default_bound(name: &str) -> f64 {
 }
 
 impl MpcOptions {
+    /// The QP work budget for a horizon of `horizon` samples: the set one or NV³.
+    pub fn qp_work(&self, horizon: usize) -> usize {
+        let nv = horizon * self.u_min.len();
+        self.max_qp_work.unwrap_or(nv * nv * nv)
+    }
+
     /// The defaults for `model`: the paper's weights and bounds, except q = 1 on yaw and r = 10
     /// on u_yaw_rate (see [`default_q`]). The one place every command takes its defaults from.
     pub fn defaults(model: &Model) -> Self {
@@ -118,6 +128,7 @@ impl MpcOptions {
             u_min: model.inputs.iter().map(|n| -default_bound(n)).collect(),
             u_max: model.inputs.iter().map(|n| default_bound(n)).collect(),
             max_qp_iterations: 200,
+            max_qp_work: None,
             max_ipm_iterations: DEFAULT_MAX_IPM_ITERATIONS,
             regularisation: 1e-9,
         }
@@ -183,6 +194,14 @@ impl MpcOptions {
                 crate::validate::MPC_MAX_QP_ITERATIONS
             ));
         }
+        if let Some(work) = file.max_qp_work {
+            if !(1..=crate::validate::MPC_MAX_QP_WORK).contains(&work) {
+                return Err(format!(
+                    "{label}: max_qp_work must be between 1 and {} multiply-adds, found {work}",
+                    crate::validate::MPC_MAX_QP_WORK
+                ));
+            }
+        }
         let max_ipm_iterations = file.max_ipm_iterations.unwrap_or(d.max_ipm_iterations);
         if !(1..=crate::validate::MPC_MAX_QP_ITERATIONS).contains(&max_ipm_iterations) {
             return Err(format!(
@@ -201,6 +220,7 @@ impl MpcOptions {
             u_min,
             u_max,
             max_qp_iterations,
+            max_qp_work: file.max_qp_work,
             max_ipm_iterations,
             regularisation,
         })

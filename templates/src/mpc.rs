@@ -7,7 +7,7 @@ use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization_into, hold_sent_inputs, input_to_send, is_sent};
 use crate::{
-    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, R_DELTA,
+    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, MAX_QP_WORK, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, R_DELTA,
     TRUST_BOUND, U_MAX, U_MIN,
 };
 
@@ -522,7 +522,7 @@ impl Mpc {
         self.v = [0.0; NV];
         let mut result = self
             .qp
-            .solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS);
+            .solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS, MAX_QP_WORK);
         let mut regularised = regularised;
         if result.status == QpStatus::NotPositiveDefinite {
             // An append found H_FF not numerically positive definite: regularise and solve again.
@@ -532,7 +532,7 @@ impl Mpc {
                     self.v = [0.0; NV];
                     let again = self
                         .qp
-                        .solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS);
+                        .solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS, MAX_QP_WORK);
                     result.iterations += again.iterations;
                     result.status = again.status;
                 }

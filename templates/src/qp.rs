@@ -35,7 +35,8 @@ pub enum Bound {
 pub enum QpStatus {
     /// KKT conditions hold: the exact minimiser (up to rounding).
     Optimal,
-    /// The iteration cap was reached; the iterate is feasible and no worse than the start.
+    /// The iteration cap or the work budget was reached; the iterate is feasible and no worse
+    /// than the start.
     IterationCap,
     /// A pivot of the reduced Hessian was not positive: H is not numerically positive definite.
     NotPositiveDefinite,
@@ -46,6 +47,37 @@ pub enum QpStatus {
 pub struct QpResult {
     pub status: QpStatus,
     pub iterations: usize,
+    /// Multiply-adds charged to the work budget (upper bounds of what ran; [`BoxQp::solve`]).
+    pub work: usize,
+}
+
+/// The work budget of one solve, in multiply-adds: every costly operation is charged an upper
+/// bound of its multiply-adds before it runs, and does not run if that would exceed `max`.
+struct Budget {
+    spent: usize,
+    max: usize,
+}
+
+impl Budget {
+    /// Whether `cost` more fits.
+    fn fits(&self, cost: usize) -> bool {
+        self.spent.saturating_add(cost) <= self.max
+    }
+
+    /// Charge `cost` if it fits; false (nothing charged) if not.
+    fn charge(&mut self, cost: usize) -> bool {
+        let fits = self.fits(cost);
+        if fits {
+            self.spent += cost;
+        }
+        fits
+    }
+}
+
+/// Multiply-adds of rows `from..to` of a Cholesky factor (Σ i²/2 for the substitutions and i
+/// for the pivots, bounded above).
+const fn rows_cost(from: usize, to: usize) -> usize {
+    (to * to * to - from * from * from) / 6 + to * to
 }
 
 /// Workspace of the active-set solver for `NV` variables (no allocation).
@@ -165,6 +197,38 @@ fn axpy8(w: &mut [Real], x: &[Real; 8], r: [&[Real]; 8]) {
 fn axpy(w: &mut [Real], x: Real, r: &[Real]) {
     for (wk, rk) in w.iter_mut().zip(r) {
         *wk -= x * rk;
+    }
+}
+
+/// acc[c][r] −= Σ_{k in lo..hi} u[k][i0 + r] · u[k][j0 + c] = L_{i0+r,k} L_{j0+c,k}, k ascending:
+/// the rank-one updates of an R × C block of the factor (row k of `u` is column k of L, so
+/// each k reads R and C contiguous entries). R × C accumulators stay in registers; the loop over r
+/// vectorises (SSE2: two lanes; AVX2: four) without reassociating anything.
+#[inline(always)]
+fn tile<const NV: usize, const R: usize, const C: usize>(
+    u: &[[Real; NV]; NV],
+    lo: usize,
+    hi: usize,
+    i0: usize,
+    j0: usize,
+    acc: &mut [[Real; R]; C],
+) {
+    let Some(rows) = u.get(lo..hi) else {
+        return;
+    };
+    for row in rows {
+        let (Some(a), Some(b)) = (row.get(i0..i0 + R), row.get(j0..j0 + C)) else {
+            return;
+        };
+        let (Ok(a), Ok(b)) = (<&[Real; R]>::try_from(a), <&[Real; C]>::try_from(b)) else {
+            return;
+        };
+        for c in 0..C {
+            let bc = b[c];
+            for r in 0..R {
+                acc[c][r] -= a[r] * bc;
+            }
+        }
     }
 }
 
@@ -408,19 +472,7 @@ impl<const NV: usize> BoxQp<NV> {
     /// on are recomputed.
     fn drop_fixed(&mut self, h: &[[Real; NV]; NV]) -> Result<(), QpStatus> {
         let nf = self.free_count();
-        // Cost estimates (multiply-adds): removing position p by rotations moves the rows
-        // below it and rotates the trailing block, ≈ (nf² − p²)/2 + 3 (nf − p)²; recomputing
-        // rows first..nf' costs ≈ (nf'³ − first³)/6. Take the cheaper way.
-        let (mut by_rotations, mut dropped, mut first) = (0usize, 0usize, nf);
-        for i in 0..nf {
-            if self.state[self.var(i)] != Bound::Free {
-                by_rotations += (nf * nf - i * i) / 2 + 3 * (nf - i) * (nf - i);
-                dropped += 1;
-                first = first.min(i);
-            }
-        }
-        let kept = nf - dropped;
-        if by_rotations < (kept * kept * kept).saturating_sub(first * first * first) / 6 {
+        if self.drop_plan().0 {
             for i in (0..nf).rev() {
                 if self.state[self.var(i)] != Bound::Free {
                     self.remove(i);
@@ -443,13 +495,40 @@ impl<const NV: usize> BoxQp<NV> {
         self.factor_rows(h, first)
     }
 
+    /// How [`Self::drop_fixed`] will drop the variables that are no longer free, and an upper
+    /// bound of its multiply-adds: removing position p by rotations moves the rows below it and
+    /// rotates the trailing block, ≤ (nf² − p²)/2 + 3 (nf − p)²; recomputing rows first..nf'
+    /// costs ≤ [`rows_cost`]. The cheaper way is taken: (by rotations, cost).
+    fn drop_plan(&self) -> (bool, usize) {
+        let nf = self.free_count();
+        let (mut by_rotations, mut dropped, mut first) = (0usize, 0usize, nf);
+        for i in 0..nf {
+            if self.state[self.var(i)] != Bound::Free {
+                by_rotations += (nf * nf - i * i) / 2 + 3 * (nf - i) * (nf - i);
+                dropped += 1;
+                first = first.min(i);
+            }
+        }
+        let kept = nf - dropped;
+        // The choice compares the leading terms; the cost charged is the bound.
+        if by_rotations < (kept * kept * kept).saturating_sub(first * first * first) / 6 {
+            (true, by_rotations)
+        } else {
+            (false, rows_cost(first.min(kept), kept))
+        }
+    }
+
     /// Rows `from..nf` of the Cholesky factor of H_FF, rows before `from` given.
     ///
-    /// Row i of L is the forward substitution L₁₁ x = H_{F(..i), F(i)} in column form (column j
-    /// of L is row j of `u`, contiguous): w ← H's column of i; for each j, x_j = w_j / L_jj and
-    /// w_k −= x_j L_kj for k > j, eight columns j at a time. The updates of w are elementwise
-    /// multiply-subtracts over contiguous slices, which vectorise on x86-64 and need no
-    /// reassociation (the order of the terms of each w_k is fixed).
+    /// Left-looking and blocked: four rows of L at a time (one where a block would cross a
+    /// component boundary or the end), and in them four columns at a time,
+    /// L_ij = (H_ij − Σ_{k<j} L_ik L_jk) / L_jj, i in the rows, j in the columns. The sums over
+    /// k < (the block's first column) run as rank-one updates of a 4 × 4 register tile
+    /// ([`tile`]; columns k of L are rows of `u`, so each k reads two contiguous runs of four),
+    /// then the block's own triangle. Every L_ij is H_ij with the terms L_ik L_jk subtracted in
+    /// ascending k, then divided: the same operations in the same order as the row-by-row forward
+    /// substitution (and [`forward`]), so the factor is the same to the bit, with 16 multiply-adds
+    /// per k held in registers instead of one load and store of the row per eight.
     fn factor_rows(&mut self, h: &[[Real; NV]; NV], from: usize) -> Result<(), QpStatus> {
         let nf = self.nf.min(NV);
         let free = self.free;
@@ -464,34 +543,130 @@ impl<const NV: usize> BoxQp<NV> {
                 first[usize::from(group[var(i)]) % NV] = i;
             }
         }
-        let w = &mut self.work;
-        for i in from..nf {
-            // i < nf ≤ NV; said again so that no bounds check (panic path) is left below.
-            if i >= NV {
-                break;
+        let mut i0 = from;
+        while i0 < nf {
+            let g = group[var(i0)];
+            let start = first[usize::from(g) % NV].min(i0);
+            let whole = i0 + 4 <= nf && (1..4).all(|r| group[var(i0 + r)] == g);
+            if whole {
+                self.factor_block::<4>(h, &free, i0, start)?;
+                i0 += 4;
+            } else {
+                self.factor_block::<1>(h, &free, i0, start)?;
+                i0 += 1;
             }
-            let hi = &h[var(i)];
-            let gi = group[var(i)];
-            let start = first[usize::from(gi) % NV].min(i);
-            // w = H's column of variable i over positions start..i; row i of L = L₁₁⁻¹ w.
-            for (wk, &v) in w[start..i].iter_mut().zip(&free[start..i]) {
-                *wk = hi[v.min(NV - 1)];
-            }
-            forward(&self.u, w, start, i, i);
-            let s = hi[var(i)] - dot(&w[start..i], &w[start..i]);
-            if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
-                return Err(QpStatus::NotPositiveDefinite);
-            }
-            // Column i of U (row i of L): exactly zero before `start`.
-            for (row, &x) in self.u.iter_mut().zip(&w[..i]).skip(start) {
-                row[i] = x;
-            }
-            for row in self.u[..start].iter_mut() {
-                row[i] = 0.0;
-            }
-            self.u[i][i] = sqrt(s);
         }
         Ok(())
+    }
+
+    /// Rows i0..i0 + R of L (all of one component, whose first position is `start`), rows
+    /// before i0 given: the columns start..i0 in 4-wide then 1-wide blocks, then the R × R
+    /// diagonal block with its pivots. Entries before `start` are exact zeros.
+    fn factor_block<const R: usize>(
+        &mut self,
+        h: &[[Real; NV]; NV],
+        free: &[usize; NV],
+        i0: usize,
+        start: usize,
+    ) -> Result<(), QpStatus> {
+        if i0 + R > NV || start > i0 {
+            return Ok(());
+        }
+        let var = |i: usize| free[i % NV].min(NV - 1);
+        let rows: [usize; R] = core::array::from_fn(|r| var(i0 + r));
+        let mut j0 = start;
+        while j0 + 4 <= i0 {
+            let mut acc: [[Real; R]; 4] = core::array::from_fn(|c| {
+                let vj = var(j0 + c);
+                core::array::from_fn(|r| h[rows[r]][vj])
+            });
+            tile(&self.u, start, j0, i0, j0, &mut acc);
+            self.finish_columns(&mut acc, i0, j0);
+            j0 += 4;
+        }
+        while j0 < i0 {
+            let vj = var(j0);
+            let mut acc: [[Real; R]; 1] = [core::array::from_fn(|r| h[rows[r]][vj])];
+            tile(&self.u, start, j0, i0, j0, &mut acc);
+            self.finish_columns(&mut acc, i0, j0);
+            j0 += 1;
+        }
+        // The diagonal block: acc[c][r] for r > c is L_{i0+r, i0+c} once finished.
+        let mut acc: [[Real; R]; R] = core::array::from_fn(|c| {
+            let vc = var(i0 + c);
+            core::array::from_fn(|r| h[rows[r]][vc])
+        });
+        tile(&self.u, start, i0, i0, i0, &mut acc);
+        for c in 0..R {
+            let q = i0 + c;
+            // Row q of L over start..q (gathered), for its pivot: the order of `dot` as before.
+            let w = &mut self.work;
+            for (wk, row) in w[start..i0].iter_mut().zip(&self.u[start..i0]) {
+                *wk = row[q];
+            }
+            for c2 in 0..c {
+                w[i0 + c2] = acc[c2][c];
+            }
+            let hq = h[rows[c]][rows[c]];
+            let s = hq - dot(&w[start..q], &w[start..q]);
+            if !(s > PIVOT_TOLERANCE * hq.abs()) {
+                return Err(QpStatus::NotPositiveDefinite);
+            }
+            let pivot = sqrt(s);
+            // Column q of L below the pivot, within the block.
+            for r in c + 1..R {
+                let mut v = acc[c][r];
+                for c2 in 0..c {
+                    v -= acc[c2][r] * acc[c2][c];
+                }
+                acc[c][r] = v / pivot;
+            }
+            // Column q of U (row q of L) is zero before `start`; start..i0 is stored by the
+            // column blocks, i0..q below.
+            for row in self.u[..start].iter_mut() {
+                row[q] = 0.0;
+            }
+            self.u[q][q] = pivot;
+        }
+        for (c, col) in acc.iter().enumerate() {
+            let Some(urow) = self.u.get_mut(i0 + c) else {
+                break;
+            };
+            for r in c + 1..R {
+                urow[i0 + r] = col[r];
+            }
+        }
+        Ok(())
+    }
+
+    /// The triangle of a column block j0..j0 + C of rows i0..i0 + R (the sums over k < j0 done):
+    /// acc[c][r] −= L_{i,j0+c2} L_{j0+c,j0+c2} for c2 < c in order, then / L_{j0+c,j0+c}; stored
+    /// as column j0 + c of L (row of `u`).
+    #[inline(always)]
+    fn finish_columns<const R: usize, const C: usize>(&mut self, acc: &mut [[Real; R]; C], i0: usize, j0: usize) {
+        if j0 + C > NV || i0 + R > NV {
+            return;
+        }
+        for c in 0..C {
+            let j = j0 + c;
+            let (done, rest) = acc.split_at_mut(c);
+            let Some(col) = rest.first_mut() else {
+                break;
+            };
+            for (c2, prev) in done.iter().enumerate() {
+                let ljk = self.u[j0 + c2][j];
+                for r in 0..R {
+                    col[r] -= prev[r] * ljk;
+                }
+            }
+            let pivot = self.u[j][j];
+            for x in col.iter_mut() {
+                *x /= pivot;
+            }
+            if let Some(dst) = self.u[j].get_mut(i0..i0 + R) {
+                dst.copy_from_slice(col);
+            }
+        }
     }
 
     /// Solve L Lᵀ y = b in place on `rhs[..nf]`: forward substitution by columns (four at a
@@ -764,6 +939,15 @@ impl<const NV: usize> BoxQp<NV> {
     /// Solve from `v` (clamped into the box) with the current working set;
     /// [`Self::factorize`] must have been called for it with the same `h`.
     /// `v` holds the solution (or the best bounded iterate) on return.
+    ///
+    /// At most `max_iterations` iterations and `max_work` multiply-adds: each costly operation
+    /// (setting up the fixed variables' gradient, a pair of triangular solves, a projection
+    /// restart, a removal from the factor, the multipliers, appending rows) is charged an upper
+    /// bound of its multiply-adds before it runs; if that does not fit, the solve stops with
+    /// [`QpStatus::IterationCap`] at the current iterate, which is feasible and no worse than the
+    /// start (a restart that would not fit is skipped instead). The multiply-adds of one solve are
+    /// then at most `max_work` plus O(NV) bookkeeping per iteration, whatever the data.
+    #[allow(clippy::too_many_arguments)]
     pub fn solve(
         &mut self,
         h: &[[Real; NV]; NV],
@@ -772,7 +956,9 @@ impl<const NV: usize> BoxQp<NV> {
         hi: &[Real; NV],
         v: &mut [Real; NV],
         max_iterations: usize,
+        max_work: usize,
     ) -> QpResult {
+        let mut budget = Budget { spent: 0, max: max_work };
         for i in 0..NV {
             v[i] = match self.state[i] {
                 Bound::Lower => lo[i],
@@ -781,6 +967,15 @@ impl<const NV: usize> BoxQp<NV> {
             };
         }
         self.fixed_gradient = [0.0; NV];
+        let mut iterations = 0;
+        let capped = |iterations: usize, budget: &Budget| QpResult {
+            status: QpStatus::IterationCap,
+            iterations,
+            work: budget.spent,
+        };
+        if !budget.charge((NV - self.free_count()) * NV) {
+            return capped(iterations, &budget);
+        }
         for j in 0..NV {
             if self.state[j] != Bound::Free {
                 self.add_fixed(h, j, v[j]);
@@ -788,11 +983,14 @@ impl<const NV: usize> BoxQp<NV> {
         }
         let scale = g.iter().fold(1.0 as Real, |m, x| m.max(x.abs()));
         let tolerance = 10.0 * Real::EPSILON * scale;
-        let mut iterations = 0;
         let mut restarts = 0;
         // The variables freed by the last release, while the iterate has not moved since.
         let mut fresh = [false; NV];
         while iterations < max_iterations {
+            let nf = self.free_count();
+            if !budget.charge(nf * nf + 2 * nf) {
+                return capped(iterations, &budget);
+            }
             iterations += 1;
             // rhs = −(g_F + H_FW v_W)
             for i in 0..self.free_count() {
@@ -804,16 +1002,24 @@ impl<const NV: usize> BoxQp<NV> {
             // fixing them one per iteration, jump to the projection of v_F* onto the
             // box, fix every violated variable and refactorise — if that does not
             // increase the objective. At most MAX_RESTARTS times per solve.
-            if restarts < MAX_RESTARTS && self.try_projection_restart(h, lo, hi, v) {
-                restarts += 1;
-                fresh = [false; NV];
-                if self.drop_fixed(h).is_err() {
-                    return QpResult {
-                        status: QpStatus::NotPositiveDefinite,
-                        iterations,
-                    };
+            // (Only if the budget holds its test, fixing every free variable and refactorising
+            // all of them: what it charges below then fits.)
+            let restart_bound = 2 * nf * nf + nf * NV + rows_cost(0, nf).max(7 * nf * nf);
+            if restarts < MAX_RESTARTS && budget.fits(restart_bound) && budget.charge(2 * nf * nf) {
+                if self.try_projection_restart(h, lo, hi, v) {
+                    restarts += 1;
+                    fresh = [false; NV];
+                    let fixed = nf - (0..nf).filter(|&i| self.state[self.var(i)] == Bound::Free).count();
+                    budget.charge(fixed * NV + self.drop_plan().1);
+                    if self.drop_fixed(h).is_err() {
+                        return QpResult {
+                            status: QpStatus::NotPositiveDefinite,
+                            iterations,
+                            work: budget.spent,
+                        };
+                    }
+                    continue;
                 }
-                continue;
             }
             // Largest α ≤ 1 keeping v_F + α (v_F* − v_F) in the box.
             let mut alpha: Real = 1.0;
@@ -846,13 +1052,22 @@ impl<const NV: usize> BoxQp<NV> {
                 // of several variables, some of which the joint direction pushes out again):
                 // fix them all at once instead of one per iteration.
                 if alpha == 0.0 && self.fix_degenerate(h, lo, hi, v, &mut fresh) {
+                    // The iterate did not move (α = 0); the variables just fixed sit at their bounds.
+                    let fixed = nf - (0..nf).filter(|&i| self.state[self.var(i)] == Bound::Free).count();
+                    if !budget.charge(fixed * NV + self.drop_plan().1) {
+                        return capped(iterations, &budget);
+                    }
                     if self.drop_fixed(h).is_err() {
                         return QpResult {
                             status: QpStatus::NotPositiveDefinite,
                             iterations,
+                            work: budget.spent,
                         };
                     }
                     continue;
+                }
+                if !budget.charge(NV + (nf * nf - p * p) / 2 + 3 * (nf - p) * (nf - p)) {
+                    return capped(iterations, &budget);
                 }
                 let var = self.var(p);
                 v[var] = if bound == Bound::Lower { lo[var] } else { hi[var] };
@@ -871,6 +1086,9 @@ impl<const NV: usize> BoxQp<NV> {
             // (Hv)_W: with fewer free than fixed variables as H_{·W} v_W (kept) + Σ_{k∈F} v_k H_k
             // (rows of H, four at a time), else one product with H per fixed variable.
             let by_free_rows = self.free_count() < NV - self.free_count();
+            if !budget.charge(nf.min(NV - nf) * NV) {
+                return capped(iterations, &budget);
+            }
             if by_free_rows {
                 self.hv_by_free_rows(h, v);
             }
@@ -896,6 +1114,10 @@ impl<const NV: usize> BoxQp<NV> {
                 }
             }
             chosen.sort_unstable_by_key(|c| c.1);
+            let count = chosen.iter().take_while(|c| c.1 < NV).count();
+            if count > 0 && !budget.charge(count * NV + rows_cost(nf, (nf + count).min(NV))) {
+                return capped(iterations, &budget);
+            }
             let mut released = 0;
             fresh = [false; NV];
             let kept = self.free_count();
@@ -911,6 +1133,7 @@ impl<const NV: usize> BoxQp<NV> {
                 return QpResult {
                     status: QpStatus::Optimal,
                     iterations,
+                    work: budget.spent,
                 };
             }
             self.nf = (kept + released).min(NV);
@@ -918,13 +1141,11 @@ impl<const NV: usize> BoxQp<NV> {
                 return QpResult {
                     status: QpStatus::NotPositiveDefinite,
                     iterations,
+                    work: budget.spent,
                 };
             }
         }
-        QpResult {
-            status: QpStatus::IterationCap,
-            iterations,
-        }
+        capped(iterations, &budget)
     }
 }
 
@@ -983,7 +1204,7 @@ mod tests {
         let mut qp = BoxQp::<2>::new();
         qp.factorize(&h).unwrap();
         let mut v = [0.0; 2];
-        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10);
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10, usize::MAX);
         assert_eq!(r.status, QpStatus::Optimal);
         assert!((v[0] - 1.0 / 3.0).abs() < 1e-15 && (v[1] - 1.0 / 3.0).abs() < 1e-15);
         assert_eq!(r.iterations, 1);
@@ -999,7 +1220,7 @@ mod tests {
         let mut qp = BoxQp::<2>::new();
         qp.factorize(&h).unwrap();
         let mut v = [0.0; 2];
-        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10);
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10, usize::MAX);
         assert_eq!(r.status, QpStatus::Optimal);
         assert_eq!(v[0], 1.0);
         assert!((v[1] + 0.5).abs() < 1e-15);
@@ -1007,7 +1228,7 @@ mod tests {
         // Warm start from the optimal working set: one iteration.
         qp.factorize(&h).unwrap();
         let mut v = [0.0; 2];
-        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10);
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10, usize::MAX);
         assert_eq!((r.status, r.iterations), (QpStatus::Optimal, 1));
     }
 
@@ -1020,7 +1241,7 @@ mod tests {
         qp.set_working_set(&[Bound::Lower, Bound::Upper]);
         qp.factorize(&h).unwrap();
         let mut v = [0.0; 2];
-        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10);
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 10, usize::MAX);
         assert_eq!(r.status, QpStatus::Optimal);
         assert!((v[0] - 1.0 / 3.0).abs() < 1e-14 && (v[1] - 1.0 / 3.0).abs() < 1e-14);
         // Both multipliers are negative: both are freed in the first iteration.
@@ -1070,14 +1291,14 @@ mod tests {
             let mut qp = BoxQp::<12>::new();
             qp.factorize(&h).unwrap();
             let mut v = [0.0; 12];
-            let r = qp.solve(&h, &g, &lo, &hi, &mut v, 200);
+            let r = qp.solve(&h, &g, &lo, &hi, &mut v, 200, usize::MAX);
             assert_eq!(r.status, QpStatus::Optimal);
             assert_kkt(&h, &g, &lo, &hi, &v);
             // Warm start from the optimal working set with a perturbed gradient.
             let g2: [Real; 12] = core::array::from_fn(|i| g[i] + 0.1 * rng.next());
             qp.factorize(&h).unwrap();
             let mut w = [0.0; 12];
-            let r2 = qp.solve(&h, &g2, &lo, &hi, &mut w, 200);
+            let r2 = qp.solve(&h, &g2, &lo, &hi, &mut w, 200, usize::MAX);
             assert_eq!(r2.status, QpStatus::Optimal);
             assert_kkt(&h, &g2, &lo, &hi, &w);
         }
@@ -1092,13 +1313,58 @@ mod tests {
             qp.factorize(&h).unwrap();
             let mut v = [0.0; 12];
             let start = objective(&h, &g, &v);
-            let r = qp.solve(&h, &g, &lo, &hi, &mut v, 2);
+            let r = qp.solve(&h, &g, &lo, &hi, &mut v, 2, usize::MAX);
             assert!(r.iterations <= 2);
             for i in 0..12 {
                 assert!(v[i] >= lo[i] && v[i] <= hi[i] && v[i].is_finite());
             }
             assert!(objective(&h, &g, &v) <= start + 1e-12);
         }
+    }
+
+    #[test]
+    fn work_budget_bounds_the_solve_and_changes_nothing_when_it_does_not_bind() {
+        // Cold solves (every variable free) of problems whose minimiser leaves the box in many
+        // places: restarts, removals and releases. A budget with room for the unbounded solve's
+        // work changes nothing; smaller ones stop it at a feasible iterate no worse than the
+        // start, with no more work charged than allowed.
+        const N: usize = 40;
+        let mut rng = Lcg(53);
+        let mut binding = 0;
+        for _ in 0..20 {
+            let (h, mut g, lo, hi) = random_problem::<N>(&mut rng);
+            for x in g.iter_mut() {
+                *x *= 10.0;
+            }
+            let mut qp = BoxQp::<N>::new();
+            qp.factorize(&h).unwrap();
+            let mut free = [0.0; N];
+            let full = qp.solve(&h, &g, &lo, &hi, &mut free, 200, usize::MAX);
+            assert_eq!(full.status, QpStatus::Optimal);
+            assert!(full.work > 0);
+            let start = objective(&h, &g, &[0.0; N]);
+            // A restart runs only if the budget holds its worst case (fixing and refactorising
+            // every free variable), so the unbounded path is kept once that much is spare.
+            let spare = full.work + 2 * N * N + N * N + rows_cost(0, N);
+            for budget in [0, full.work / 10, full.work / 3, full.work - 1, spare] {
+                let mut qp = BoxQp::<N>::new();
+                qp.factorize(&h).unwrap();
+                let mut v = [0.0; N];
+                let r = qp.solve(&h, &g, &lo, &hi, &mut v, 200, budget);
+                assert!(r.work <= budget, "charged {} > budget {budget}", r.work);
+                for i in 0..N {
+                    assert!(v[i] >= lo[i] && v[i] <= hi[i] && v[i].is_finite());
+                }
+                assert!(objective(&h, &g, &v) <= start + 1e-9);
+                if budget == spare {
+                    assert_eq!(r, full);
+                    assert_eq!(v, free);
+                } else {
+                    binding += usize::from(r.status == QpStatus::IterationCap);
+                }
+            }
+        }
+        assert!(binding >= 40, "the smaller budgets bound only {binding} of 80 solves");
     }
 
     #[test]
@@ -1124,8 +1390,8 @@ mod tests {
             // Fresh order: component 0 first.
             assert!(grouped.free[..4].iter().all(|&v| G[v] == 0));
             let (mut v, mut w) = ([0.0; 12], [0.0; 12]);
-            let r = plain.solve(&h, &g, &lo, &hi, &mut v, 200);
-            let s = grouped.solve(&h, &g, &lo, &hi, &mut w, 200);
+            let r = plain.solve(&h, &g, &lo, &hi, &mut v, 200, usize::MAX);
+            let s = grouped.solve(&h, &g, &lo, &hi, &mut w, 200, usize::MAX);
             assert_eq!(s.status, QpStatus::Optimal);
             assert_eq!(r.status, QpStatus::Optimal);
             assert_kkt(&h, &g, &lo, &hi, &w);
@@ -1165,7 +1431,7 @@ mod tests {
                 }
             }
             let mut v = [0.0; N];
-            assert_eq!(plain.solve(&h, &g, &lo, &hi, &mut v, 200).status, QpStatus::Optimal);
+            assert_eq!(plain.solve(&h, &g, &lo, &hi, &mut v, 200, usize::MAX).status, QpStatus::Optimal);
             assert_kkt(&h, &g, &lo, &hi, &v);
             for i in 0..N {
                 for j in 0..N {
@@ -1178,13 +1444,87 @@ mod tests {
             plain.factorize(&h).unwrap();
             grouped.factorize(&h).unwrap();
             let (mut v, mut w) = ([0.0; N], [0.0; N]);
-            assert_eq!(plain.solve(&h, &g, &lo, &hi, &mut v, 200).status, QpStatus::Optimal);
-            assert_eq!(grouped.solve(&h, &g, &lo, &hi, &mut w, 200).status, QpStatus::Optimal);
+            assert_eq!(plain.solve(&h, &g, &lo, &hi, &mut v, 200, usize::MAX).status, QpStatus::Optimal);
+            assert_eq!(grouped.solve(&h, &g, &lo, &hi, &mut w, 200, usize::MAX).status, QpStatus::Optimal);
             assert_kkt(&h, &g, &lo, &hi, &w);
             for i in 0..N {
                 assert!((v[i] - w[i]).abs() < 1e-10, "v[{i}] = {} vs {}", v[i], w[i]);
             }
         }
+    }
+
+    /// The textbook recursion in the order the blocked factorisation keeps: L_ij = (H_ij −
+    /// Σ_{k<j} L_ik L_jk, k ascending) / L_jj, L_ii = √(H_ii − dot(L_i·, L_i·)), zero between
+    /// components.
+    fn reference_factor<const N: usize>(qp: &BoxQp<N>, h: &[[Real; N]; N]) -> [[Real; N]; N] {
+        let nf = qp.free_count();
+        let mut l = [[0.0; N]; N];
+        for i in 0..nf {
+            let (vi, gi) = (qp.var(i), qp.group[qp.var(i)]);
+            for j in 0..i {
+                let vj = qp.var(j);
+                if qp.groups > 1 && qp.group[vj] != gi {
+                    continue;
+                }
+                let mut s = h[vi][vj];
+                for k in 0..j {
+                    if qp.groups <= 1 || qp.group[qp.var(k)] == gi {
+                        s -= l[i][k] * l[j][k];
+                    }
+                }
+                l[i][j] = s / l[j][j];
+            }
+            let start = (0..i).find(|&k| qp.groups <= 1 || qp.group[qp.var(k)] == gi).unwrap_or(i);
+            l[i][i] = sqrt(h[vi][vi] - dot(&l[i][start..i], &l[i][start..i]));
+        }
+        l
+    }
+
+    #[test]
+    fn blocked_factorisation_equals_the_textbook_recursion_to_the_bit() {
+        // 23 and 30 variables (blocks of four and single rows and columns), one component and
+        // three interleaved ones (blocks cut at component boundaries), whole and from a middle row.
+        fn check<const N: usize>(seed: u64, groups: bool) {
+            let mut rng = Lcg(seed);
+            let group: [u8; N] = core::array::from_fn(|i| if groups { (i % 3) as u8 } else { 0 });
+            let (mut h, _, _, _) = random_problem::<N>(&mut rng);
+            for i in 0..N {
+                for j in 0..N {
+                    if group[i] != group[j] {
+                        h[i][j] = 0.0;
+                    }
+                }
+            }
+            let mut qp = if groups { BoxQp::<N>::with_groups(group) } else { BoxQp::<N>::new() };
+            let mut state = [Bound::Free; N];
+            state[5] = Bound::Lower;
+            state[N - 2] = Bound::Upper;
+            qp.set_working_set(&state);
+            qp.factorize(&h).unwrap();
+            let expect = reference_factor(&qp, &h);
+            let nf = qp.free_count();
+            for i in 0..nf {
+                for j in 0..=i {
+                    assert_eq!(qp.u[j][i].to_bits(), expect[i][j].to_bits(), "L[{i}][{j}]");
+                }
+            }
+            // Rows 9.. again, the rows before kept: the same factor.
+            for row in qp.u.iter_mut() {
+                for x in row[9..].iter_mut() {
+                    *x = Real::NAN;
+                }
+            }
+            qp.factor_rows(&h, 9).unwrap();
+            for i in 0..nf {
+                for j in 0..=i {
+                    assert_eq!(qp.u[j][i].to_bits(), expect[i][j].to_bits(), "from 9: L[{i}][{j}]");
+                }
+            }
+        }
+        check::<23>(31, false);
+        check::<23>(37, true);
+        check::<30>(41, false);
+        check::<30>(43, true);
     }
 
     #[test]

@@ -931,7 +931,7 @@ mod tests {
         let mut qp = BoxQp::<NV>::new();
         qp.factorize(&h).unwrap();
         let mut v = [0.0; NV];
-        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 1000);
+        let r = qp.solve(&h, &g, &lo, &hi, &mut v, 1000, usize::MAX);
         assert_eq!(r.status, QpStatus::Optimal);
         v
     }

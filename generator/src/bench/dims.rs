@@ -68,6 +68,8 @@ pub fn read(crate_dir: &Path) -> Result<CrateDims, String> {
             u_min: get("U_MIN")?,
             u_max: get("U_MAX")?,
             max_qp_iterations: scalar("MAX_QP_ITERATIONS")? as usize,
+            // Crates generated before the work budget have no such constant.
+            max_qp_work: scalar("MAX_QP_WORK").ok().map(|v| v as usize),
             // Crates generated before the Riccati solver have no such constant.
             max_ipm_iterations: scalar("MAX_IPM_ITERATIONS")
                 .map_or(crate::mpc_options::DEFAULT_MAX_IPM_ITERATIONS, |v| v as usize),

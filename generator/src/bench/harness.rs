@@ -80,8 +80,8 @@ pub fn build_harness(crate_dir: &Path, options: &BenchOptions) -> Result<(String
         .arg(dir.join("Cargo.toml"))
         .arg("--target-dir")
         .arg(work.join("target"));
-    if options.native {
-        cargo.env("RUSTFLAGS", "-C target-cpu=native");
+    if let Some(cpu) = &options.target_cpu {
+        cargo.env("RUSTFLAGS", format!("-C target-cpu={cpu}"));
     }
     let status = cargo.status().map_err(|e| format!("cannot run cargo: {e}"))?;
     if !status.success() {

@@ -34,8 +34,8 @@ pub struct BenchOptions {
     pub instruction_steps: usize,
     /// Trials of the adversarial search counted under callgrind; 0 skips it.
     pub adversarial_trials: usize,
-    /// Build with `-C target-cpu=native`.
-    pub native: bool,
+    /// Build with `-C target-cpu=<this>` (None: rustc's default for the host, x86-64 / SSE2).
+    pub target_cpu: Option<String>,
     /// Where the scratch crate and its target directory live.
     pub work_dir: std::path::PathBuf,
 }

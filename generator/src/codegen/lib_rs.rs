@@ -76,6 +76,7 @@ pub fn dims_values(
         ("INPUT_DELAY_SAMPLES", quote!([#(#delay_samples),*])),
         ("INPUT_LEAD", quote!([#(#input_lead),*])),
         ("MAX_QP_ITERATIONS", lit(mpc.max_qp_iterations)),
+        ("MAX_QP_WORK", lit(mpc.qp_work(options.horizon))),
         ("MAX_IPM_ITERATIONS", lit(mpc.max_ipm_iterations)),
         ("TRUST_BOUND", quote!([#(#trust),*])),
         ("ENVELOPE_LO", quote!([#(#lo),*])),

@@ -670,6 +670,7 @@ mod tests {
                 u_min: vec![-u_bound],
                 u_max: vec![u_bound],
                 max_qp_iterations: 200,
+                max_qp_work: None,
                 max_ipm_iterations: 30,
                 regularisation,
             },
