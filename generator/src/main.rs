@@ -500,7 +500,11 @@ fn bench(args: BenchArgs) -> Result<(), String> {
         generic_steps: args.generic_steps,
         instruction_steps: args.instructions,
         adversarial_trials: args.adversarial,
-        target_cpu: if args.native { Some("native".into()) } else { args.target_cpu.clone() },
+        target_cpu: if args.native {
+            Some("native".into())
+        } else {
+            args.target_cpu.clone()
+        },
         work_dir,
     };
     if let Some(p) = args.peak_gflops {

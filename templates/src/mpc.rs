@@ -7,8 +7,8 @@ use crate::math::sqrt;
 use crate::qp::{BoxQp, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization_into, hold_sent_inputs, input_to_send, is_sent};
 use crate::{
-    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, MAX_QP_WORK, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION, R_DELTA,
-    TRUST_BOUND, U_MAX, U_MIN,
+    Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, MAX_QP_WORK, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION,
+    R_DELTA, TRUST_BOUND, U_MAX, U_MIN,
 };
 
 /// What happened in a solve.
@@ -16,7 +16,7 @@ use crate::{
 pub enum Status {
     /// The QP was solved to optimality.
     Solved,
-    /// The QP hit `MAX_QP_ITERATIONS`; the best bounded iterate was applied.
+    /// The QP hit `MAX_QP_ITERATIONS` or `MAX_QP_WORK`; the best bounded iterate was applied.
     IterationCap,
     /// The condensed Hessian was not numerically positive definite; a multiple of I was added.
     HessianRegularised,
@@ -520,9 +520,15 @@ impl Mpc {
 
         // Box QP from v = 0 (ū is feasible, so 0 is in the box) with the warm-start working set.
         self.v = [0.0; NV];
-        let mut result = self
-            .qp
-            .solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS, MAX_QP_WORK);
+        let mut result = self.qp.solve(
+            &self.h,
+            &self.g,
+            &self.lo,
+            &self.hi,
+            &mut self.v,
+            MAX_QP_ITERATIONS,
+            MAX_QP_WORK,
+        );
         let mut regularised = regularised;
         if result.status == QpStatus::NotPositiveDefinite {
             // An append found H_FF not numerically positive definite: regularise and solve again.
@@ -530,9 +536,15 @@ impl Mpc {
                 true => {
                     regularised = true;
                     self.v = [0.0; NV];
-                    let again = self
-                        .qp
-                        .solve(&self.h, &self.g, &self.lo, &self.hi, &mut self.v, MAX_QP_ITERATIONS, MAX_QP_WORK);
+                    let again = self.qp.solve(
+                        &self.h,
+                        &self.g,
+                        &self.lo,
+                        &self.hi,
+                        &mut self.v,
+                        MAX_QP_ITERATIONS,
+                        MAX_QP_WORK,
+                    );
                     result.iterations += again.iterations;
                     result.status = again.status;
                 }

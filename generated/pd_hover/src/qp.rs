@@ -547,10 +547,42 @@ impl<const NV: usize> BoxQp<NV> {
                 self.factor_block::<4>(h, &free, i0, start)?;
                 i0 += 4;
             } else {
-                self.factor_block::<1>(h, &free, i0, start)?;
+                self.factor_row(h, &free, i0, start)?;
                 i0 += 1;
             }
         }
+        Ok(())
+    }
+    /// Row i of L alone (a block of one): the forward substitution L₁₁ x = H_{F(start..i), F(i)}
+    /// in column form ([`forward`], eight columns at a time along the row), then the pivot.
+    fn factor_row(
+        &mut self,
+        h: &[[Real; NV]; NV],
+        free: &[usize; NV],
+        i: usize,
+        start: usize,
+    ) -> Result<(), QpStatus> {
+        if i >= NV || start > i {
+            return Ok(());
+        }
+        let var = |k: usize| free[k % NV].min(NV - 1);
+        let hi = &h[var(i)];
+        let w = &mut self.work;
+        for (wk, &v) in w[start..i].iter_mut().zip(&free[start..i]) {
+            *wk = hi[v.min(NV - 1)];
+        }
+        forward(&self.u, w, start, i, i);
+        let s = hi[var(i)] - dot(&w[start..i], &w[start..i]);
+        if !(s > PIVOT_TOLERANCE * hi[var(i)].abs()) {
+            return Err(QpStatus::NotPositiveDefinite);
+        }
+        for (row, &x) in self.u.iter_mut().zip(&w[..i]).skip(start) {
+            row[i] = x;
+        }
+        for row in self.u[..start].iter_mut() {
+            row[i] = 0.0;
+        }
+        self.u[i][i] = sqrt(s);
         Ok(())
     }
     /// Rows i0..i0 + R of L (all of one component, whose first position is `start`), rows
@@ -592,14 +624,20 @@ impl<const NV: usize> BoxQp<NV> {
         tile(&self.u, start, i0, i0, i0, &mut acc);
         for c in 0..R {
             let q = i0 + c;
+            if q >= NV {
+                break;
+            }
             let w = &mut self.work;
             for (wk, row) in w[start..i0].iter_mut().zip(&self.u[start..i0]) {
                 *wk = row[q];
             }
-            for c2 in 0..c {
-                w[i0 + c2] = acc[c2][c];
+            if let Some(wb) = w.get_mut(i0..q) {
+                for (wk, col) in wb.iter_mut().zip(&acc) {
+                    *wk = col[c];
+                }
             }
-            let hq = h[rows[c]][rows[c]];
+            let vq = var(q);
+            let hq = h[vq][vq];
             let s = hq - dot(&w[start..q], &w[start..q]);
             if !(s > PIVOT_TOLERANCE * hq.abs()) {
                 return Err(QpStatus::NotPositiveDefinite);
@@ -621,8 +659,11 @@ impl<const NV: usize> BoxQp<NV> {
             let Some(urow) = self.u.get_mut(i0 + c) else {
                 break;
             };
-            for r in c + 1..R {
-                urow[i0 + r] = col[r];
+            if let (Some(dst), Some(src)) = (
+                urow.get_mut(i0 + c + 1..i0 + R),
+                col.get(c + 1..R),
+            ) {
+                dst.copy_from_slice(src);
             }
         }
         Ok(())
@@ -642,12 +683,15 @@ impl<const NV: usize> BoxQp<NV> {
         }
         for c in 0..C {
             let j = j0 + c;
+            if j >= NV {
+                break;
+            }
             let (done, rest) = acc.split_at_mut(c);
             let Some(col) = rest.first_mut() else {
                 break;
             };
-            for (c2, prev) in done.iter().enumerate() {
-                let ljk = self.u[j0 + c2][j];
+            for (prev, urow) in done.iter().zip(&self.u[j0..j]) {
+                let ljk = urow[j];
                 for r in 0..R {
                     col[r] -= prev[r] * ljk;
                 }
@@ -983,24 +1027,23 @@ impl<const NV: usize> BoxQp<NV> {
                 + rows_cost(0, nf).max(7 * nf * nf);
             if restarts < MAX_RESTARTS && budget.fits(restart_bound)
                 && budget.charge(2 * nf * nf)
+                && self.try_projection_restart(h, lo, hi, v)
             {
-                if self.try_projection_restart(h, lo, hi, v) {
-                    restarts += 1;
-                    fresh = [false; NV];
-                    let fixed = nf
-                        - (0..nf)
-                            .filter(|&i| self.state[self.var(i)] == Bound::Free)
-                            .count();
-                    budget.charge(fixed * NV + self.drop_plan().1);
-                    if self.drop_fixed(h).is_err() {
-                        return QpResult {
-                            status: QpStatus::NotPositiveDefinite,
-                            iterations,
-                            work: budget.spent,
-                        };
-                    }
-                    continue;
+                restarts += 1;
+                fresh = [false; NV];
+                let fixed = nf
+                    - (0..nf)
+                        .filter(|&i| self.state[self.var(i)] == Bound::Free)
+                        .count();
+                budget.charge(fixed * NV + self.drop_plan().1);
+                if self.drop_fixed(h).is_err() {
+                    return QpResult {
+                        status: QpStatus::NotPositiveDefinite,
+                        iterations,
+                        work: budget.spent,
+                    };
                 }
+                continue;
             }
             let mut alpha: Real = 1.0;
             let mut blocking = None;

@@ -21,7 +21,7 @@ use crate::{
 pub enum Status {
     /// The QP was solved to optimality.
     Solved,
-    /// The QP hit `MAX_QP_ITERATIONS`; the best bounded iterate was applied.
+    /// The QP hit `MAX_QP_ITERATIONS` or `MAX_QP_WORK`; the best bounded iterate was applied.
     IterationCap,
     /// The condensed Hessian was not numerically positive definite; a multiple of I was added.
     HessianRegularised,

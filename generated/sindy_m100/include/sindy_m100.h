@@ -76,7 +76,7 @@ typedef int32_t sindy_m100_status;
 enum sindy_m100_status_code {
     SINDY_M100_OK = 0, /* the call succeeded (same value as SOLVED) */
     SINDY_M100_SOLVED = 0, /* the QP was solved to optimality */
-    SINDY_M100_ITERATION_CAP = 1, /* the QP hit MAX_QP_ITERATIONS; the best bounded iterate was applied */
+    SINDY_M100_ITERATION_CAP = 1, /* the QP hit MAX_QP_ITERATIONS or MAX_QP_WORK; the best bounded iterate was applied */
     SINDY_M100_HESSIAN_REGULARISED = 2, /* the condensed Hessian needed a multiple of I to be positive definite */
     SINDY_M100_INVALID_INPUT = 3, /* a non-finite state or reference: the previous plan is kept, u0 is its first input */
     SINDY_M100_NUMERICAL_FAILURE = 4, /* a non-finite value in the linearisation or the step: the previous plan is kept */

@@ -39,7 +39,7 @@ pub const STATUS_CODES: &[(&str, i32, &str)] = &[
     (
         "ITERATION_CAP",
         1,
-        "the QP hit MAX_QP_ITERATIONS; the best bounded iterate was applied",
+        "the QP hit MAX_QP_ITERATIONS or MAX_QP_WORK; the best bounded iterate was applied",
     ),
     (
         "HESSIAN_REGULARISED",

@@ -47,7 +47,7 @@ pub fn readme(
          }}\n\
          ```\n\n\
          `mpc.solve(&x, &reference)` is `prepare` + `feedback` in one call. The weights, bounds and limits \
-         are the constants `Q`, `Q_TERMINAL`, `R`, `U_MIN`, `U_MAX`, `MAX_QP_ITERATIONS`; `ENVELOPE_LO`, `ENVELOPE_HI` \
+         are the constants `Q`, `Q_TERMINAL`, `R`, `U_MIN`, `U_MAX`, `MAX_QP_ITERATIONS`, `MAX_QP_WORK`; `ENVELOPE_LO`, `ENVELOPE_HI` \
          bound the plausible x₀ and reference ({envelope}; beyond them a solve reports `OutOfEnvelope`). The `uavgen-runtime` crate wraps this loop (`Controller`, delay compensation).\n\n\
          See uavgen's docs/generated-api.md and docs/mpc.md for the full API.\n{c_api}",
         model.name,

@@ -32,7 +32,7 @@ pub mod status {
     pub const OK: i32 = 0;
     /// the QP was solved to optimality.
     pub const SOLVED: i32 = 0;
-    /// the QP hit MAX_QP_ITERATIONS; the best bounded iterate was applied.
+    /// the QP hit MAX_QP_ITERATIONS or MAX_QP_WORK; the best bounded iterate was applied.
     pub const ITERATION_CAP: i32 = 1;
     /// the condensed Hessian needed a multiple of I to be positive definite.
     pub const HESSIAN_REGULARISED: i32 = 2;
