@@ -383,7 +383,7 @@ fn mpc_options_and_the_iteration_cap() {
     let options = tmp.path().join("options.json");
     fs::write(
         &options,
-        r#"{"max_qp_iterations": 1, "u_max": [4, 0.5, 0.5, 2], "u_min": [-4, -0.5, -0.5, -2]}"#,
+        r#"{"max_qp_iterations": 1, "max_qp_work": 90000, "u_max": [4, 0.5, 0.5, 2], "u_min": [-4, -0.5, -0.5, -2]}"#,
     )
     .unwrap();
     let out = tmp.path().join("capped");
@@ -400,7 +400,7 @@ fn mpc_options_and_the_iteration_cap() {
     assert!(o.status.success(), "{}", stderr(&o));
     let lib = fs::read_to_string(out.join("src/lib.rs")).unwrap();
     assert!(
-        lib.contains("max_qp_iterations=1"),
+        lib.contains("max_qp_iterations=1 max_qp_work=90000"),
         "the header records the MPC options"
     );
     let test = r#"
@@ -415,6 +415,7 @@ fn cap_is_reported_and_the_input_is_safe() {
     assert_eq!(s.status, Status::IterationCap);
     assert_eq!(s.qp_iterations, 1);
     assert_eq!(MAX_QP_ITERATIONS, 1);
+    assert_eq!(MAX_QP_WORK, 90000);
     assert_eq!(U_MAX, [4.0, 0.5, 0.5, 2.0]);
     for i in 0..NU {
         assert!(s.u0[i].is_finite() && s.u0[i] >= U_MIN[i] && s.u0[i] <= U_MAX[i]);

@@ -556,7 +556,7 @@ fn mpc_cases() -> Vec<Case> {
     let full = json!({
         "q": [2, 2, 2, 0, 0, 1, 0, 0, 0, 0, 0, 0], "q_terminal": [2, 2, 2, 0, 0, 1, 0, 0, 0, 0, 0, 0],
         "r": [0.1, 0.1, 0.1, 10], "u_min": [-5, -0.6, -0.6, -2.6], "u_max": [5, 0.6, 0.6, 2.6],
-        "max_qp_iterations": 200, "max_ipm_iterations": 30, "regularisation": 1e-9
+        "max_qp_iterations": 200, "max_qp_work": 1728000, "max_ipm_iterations": 30, "regularisation": 1e-9
     });
     let mut add = |label: String, bytes: Vec<u8>, places: &[&str], generate: bool| {
         cases.push(case(
@@ -600,6 +600,9 @@ fn mpc_cases() -> Vec<Case> {
         ("/max_qp_iterations", json!(0), "max_qp_iterations"),
         ("/max_qp_iterations", json!(-5), "max_qp_iterations"),
         ("/max_qp_iterations", json!(1e9), "max_qp_iterations"),
+        ("/max_qp_work", json!(0), "max_qp_work"),
+        ("/max_qp_work", json!(-5), "max_qp_work"),
+        ("/max_qp_work", json!(10_000_000_000_000u64), "max_qp_work"),
         ("/regularisation", json!(-1e-9), "regularisation"),
         ("/regularisation", json!(2), "regularisation"),
         ("/u_max", json!("wide"), "u_max"),
