@@ -270,16 +270,16 @@ impl Jacobian {
         }
     }
 
-    /// The four kernels of a substep from S of pattern `s` (`at_identity`: S = [I 0]) and their
-    /// multiply-adds.
-    fn substep(&self, s: &[Vec<bool>], at_identity: bool) -> ([Vec<TokenStream>; 4], usize) {
+    /// The four kernels of a substep from S of pattern `s` (`at_identity`: S = [I 0]), their
+    /// multiply-adds and the pattern of S after it.
+    fn substep(&self, s: &[Vec<bool>], at_identity: bool) -> ([Vec<TokenStream>; 4], usize, Pattern) {
         let none = vec![vec![false; self.nz]; self.nx];
         let k1 = self.stage(Stage::First, at_identity, s, None, &none);
         let k2 = self.stage(Stage::Middle, at_identity, s, Some(&k1.out), &k1.acc);
         let k3 = self.stage(Stage::Middle, at_identity, s, Some(&k2.out), &k2.acc);
         let k4 = self.stage(Stage::Last, at_identity, s, Some(&k3.out), &k3.acc);
         let flops = k1.flops + k2.flops + k3.flops + k4.flops;
-        ([k1.stmts, k2.stmts, k3.stmts, k4.stmts], flops)
+        ([k1.stmts, k2.stmts, k3.stmts, k4.stmts], flops, k4.out)
     }
 }
 
@@ -379,8 +379,14 @@ pub fn emit(
     for (i, row) in identity.iter_mut().enumerate() {
         row[i] = true;
     }
-    let ([i1, i2, i3, i4], first_flops) = jac.substep(&identity, true);
-    let ([g1, g2, g3, g4], later_flops) = jac.substep(s_pattern, false);
+    let ([i1, i2, i3, i4], first_flops, after_first) = jac.substep(&identity, true);
+    let ([g1, g2, g3, g4], later_flops, _) = jac.substep(s_pattern, false);
+    // The generator's propagation (kernels::Structure) covers the first substep's S.
+    debug_assert!(after_first
+        .iter()
+        .flatten()
+        .zip(s_pattern.iter().flatten())
+        .all(|(a, s)| !a || *s));
     flops.first_substep = first_flops;
     flops.later_substep = later_flops;
     flops.combine_dense = 7 * ir.nx * nz_count;
@@ -483,4 +489,45 @@ pub fn emit(
         }
     };
     Ok((tokens, used, flops))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codegen::kernels::Structure;
+
+    fn pat(rows: &[&[u8]]) -> Pattern {
+        rows.iter().map(|r| r.iter().map(|&v| v != 0).collect()).collect()
+    }
+
+    #[test]
+    fn oscillator_stage_kernels_by_hand() {
+        // ẋ₀ = x₁, ẋ₁ = c(x) x₀ + u: [∂f/∂x ∂f/∂u] = [[0, 1, 0], [jv₀, 0, 1]].
+        let jac = Jacobian {
+            nx: 2,
+            nz: 3,
+            rows: vec![vec![(1, Coef::One)], vec![(0, Coef::Value(0)), (2, Coef::One)]],
+        };
+        let (kernels, flops, after) = jac.substep(&pat(&[&[1, 0, 0], &[0, 1, 0]]), true);
+        // Stage 1: Y₁ = I + a J, 3 entries a·d (the diagonal is copied). Stage 2 (Y₁ full but for
+        // (0, 2)): row 0 copies, row 1 jv₀ y₀ⱼ for j = 0, 1 and the ∂f/∂u term alone for j = 2 (3);
+        // ACC 6, Y 6. Stage 3 (Y₂ full): products 1 + 1 + 2, ACC 6, Y 6. Stage 4: products 4, 2 per
+        // entry of S (6).
+        assert_eq!(flops, 3 + (3 + 6 + 6) + (4 + 6 + 6) + (4 + 12));
+        let structure = Structure::new(
+            &pat(&[&[0, 1], &[1, 0]]),
+            &pat(&[&[0], &[1]]),
+            1,
+            &[1.0, 1.0],
+            &[1.0, 1.0],
+        );
+        assert_eq!(after, structure.s);
+        // The first stage needs no products: the derivatives themselves.
+        let first = kernels[0].iter().map(|t| t.to_string()).collect::<Vec<_>>().join(" ");
+        assert!(!first.contains("= y [") && !first.contains("* y ["), "{first}");
+        // A later substep from the full pattern stays in it.
+        let (_, later, after_later) = jac.substep(&structure.s, false);
+        assert_eq!(after_later, structure.s);
+        assert!(later > flops);
+    }
 }
