@@ -4,8 +4,10 @@
 // mpc: q=[2.0, 2.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] q_terminal=[2.0, 2.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0] r=[0.1, 0.1, 0.1, 10.0] r_delta=[0.0, 50.0, 50.0, 0.0] u_min=[-5.0, -0.611, -0.611, -2.6179938779914944] u_max=[5.0, 0.611, 0.611, 2.6179938779914944] max_qp_iterations=200 max_qp_work=1728000 max_ipm_iterations=30 regularisation=1e-9
 //! Explicit RK4 with `SUBSTEPS` substeps per sample and forward sensitivities.
 use crate::model::{
-    continuous_dynamics, continuous_sensitivity, continuous_sensitivity_at_identity,
-    sensitivity_axpy, sensitivity_step,
+    continuous_derivatives, continuous_dynamics, sensitivity_stage1,
+    sensitivity_stage1_at_identity, sensitivity_stage2, sensitivity_stage2_at_identity,
+    sensitivity_stage3, sensitivity_stage3_at_identity, sensitivity_stage4,
+    sensitivity_stage4_at_identity, NJ,
 };
 use crate::{Real, DT, INPUT_LEAD, N, NU, NX, NZ, SUBSTEPS};
 /// Substep length h = DT / M.
@@ -58,6 +60,12 @@ pub fn discrete_linearization(
 }
 /// [`discrete_linearization`] writing A and B in place (the solvers' stage matrices, no copies):
 /// returns x⁺.
+///
+/// The four stages of a substep go through the model's stage kernels (docs/discretisation.md): each
+/// evaluates D = ∂f/∂x · Y + ∂f/∂u · [0 I] at its Y and combines it in place, ACC = D1 + 2 D2 + 2 D3
+/// accumulated and the next stage's Y = S + a D written into one of two buffers, so no D is stored
+/// and no matrix is copied. The first substep starts at S = [I 0] and uses the kernels specialised
+/// to it. The sums are those of [`discrete_linearization`]'s recursion term for term.
 pub fn discrete_linearization_into(
     x: &[Real; NX],
     u: &[Real; NU],
@@ -69,31 +77,39 @@ pub fn discrete_linearization_into(
     for (i, row) in s.iter_mut().enumerate() {
         row[i] = 1.0;
     }
+    let mut acc = [[0.0; NZ]; NX];
+    let mut y = [[0.0; NZ]; NX];
+    let mut y_next = [[0.0; NZ]; NX];
+    let mut jv = [0.0; NJ];
     for step in 0..SUBSTEPS {
-        let (k1, d1) = if step == 0 {
-            continuous_sensitivity_at_identity(&xk, u)
+        let first = step == 0;
+        let k1 = continuous_derivatives(&xk, u, &mut jv);
+        if first {
+            sensitivity_stage1_at_identity(&jv, 0.5 * H, &mut acc, &mut y);
         } else {
-            continuous_sensitivity(&xk, u, &s)
-        };
-        let (k2, d2) = continuous_sensitivity(
-            &axpy(&xk, 0.5 * H, &k1),
-            u,
-            &sensitivity_axpy(&s, 0.5 * H, &d1),
-        );
-        let (k3, d3) = continuous_sensitivity(
-            &axpy(&xk, 0.5 * H, &k2),
-            u,
-            &sensitivity_axpy(&s, 0.5 * H, &d2),
-        );
-        let (k4, d4) = continuous_sensitivity(
-            &axpy(&xk, H, &k3),
-            u,
-            &sensitivity_axpy(&s, H, &d3),
-        );
+            sensitivity_stage1(&jv, &s, 0.5 * H, &mut acc, &mut y);
+        }
+        let k2 = continuous_derivatives(&axpy(&xk, 0.5 * H, &k1), u, &mut jv);
+        if first {
+            sensitivity_stage2_at_identity(&jv, &y, 0.5 * H, &mut acc, &mut y_next);
+        } else {
+            sensitivity_stage2(&jv, &y, &s, 0.5 * H, &mut acc, &mut y_next);
+        }
+        let k3 = continuous_derivatives(&axpy(&xk, 0.5 * H, &k2), u, &mut jv);
+        if first {
+            sensitivity_stage3_at_identity(&jv, &y_next, H, &mut acc, &mut y);
+        } else {
+            sensitivity_stage3(&jv, &y_next, &s, H, &mut acc, &mut y);
+        }
+        let k4 = continuous_derivatives(&axpy(&xk, H, &k3), u, &mut jv);
+        if first {
+            sensitivity_stage4_at_identity(&jv, &y, H / 6.0, &acc, &mut s);
+        } else {
+            sensitivity_stage4(&jv, &y, H / 6.0, &acc, &mut s);
+        }
         for i in 0..NX {
             xk[i] += H / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         }
-        sensitivity_step(&mut s, H / 6.0, &d1, &d2, &d3, &d4);
     }
     for i in 0..NX {
         a[i].copy_from_slice(&s[i][..NX]);

@@ -3,13 +3,15 @@
 
 use crate::ir::ModelIr;
 use crate::symbolic::emit::local_ident;
-use crate::symbolic::{Emitter, Float, Id, NonFiniteConstant};
+use crate::symbolic::{float_literal, Emitter, Float, NonFiniteConstant};
 use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 use std::collections::BTreeSet;
 
 /// Locals the emitted functions use besides the model's variables.
-const RESERVED: &[&str] = &["x", "u", "s", "f", "ds", "j", "fx", "fu", "Real", "NX", "NU", "NZ"];
+const RESERVED: &[&str] = &[
+    "x", "u", "s", "f", "ds", "j", "jv", "fx", "fu", "Real", "NX", "NU", "NZ", "NJ", "Sens",
+];
 
 /// Bindings `let ([x, y, …], [u_vz, …]) = (*x, *u);` and the variable tokens.
 fn bind_variables(ir: &ModelIr) -> (TokenStream, Vec<TokenStream>) {
@@ -53,28 +55,231 @@ fn index(i: usize) -> proc_macro2::Literal {
     proc_macro2::Literal::usize_unsuffixed(i)
 }
 
-/// Multiply-adds of one `continuous_sensitivity` call (∂f/∂x · S, a coefficient-one term and a
-/// copied row count as their additions, 0 for a copy) and of the RK4 sensitivity updates of one
-/// substep (3 `sensitivity_axpy`, 4 per entry in `sensitivity_step`), as emitted (`after`) and
-/// over all NZ columns (`dense`, the code before the columns were specialised).
+/// Multiply-adds of the emitted RK4 sensitivity kernels (products ∂f/∂x · Y, a coefficient-one term
+/// and a ∂f/∂u term counting as their additions and a copied entry as 0, and the combinations
+/// ACC += 2 D, Y = S + a D, S += c (ACC + D), an assignment counting 0) of one substep: the first of
+/// a sample (from S = [I 0], `sensitivity_stage*_at_identity`) and a later one
+/// (`sensitivity_stage*`), as emitted; and over all NZ columns (`stage_dense` per stage product,
+/// `combine_dense` per substep: the code before the columns were specialised).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SensitivityFlops {
-    pub stage: usize,
+    pub first_substep: usize,
+    pub later_substep: usize,
     pub stage_dense: usize,
-    pub combine: usize,
     pub combine_dense: usize,
 }
 
 impl SensitivityFlops {
-    /// Per RTI step: N samples × `substeps` × (4 stages + the combinations), less one stage per
-    /// sample in the emitted code (its first stage is at S = [I 0]: no products,
-    /// `continuous_sensitivity_at_identity`).
+    /// Per RTI step (N = `horizon` samples of `substeps` substeps): (emitted, dense).
     pub fn per_step(&self, horizon: usize, substeps: usize) -> (usize, usize) {
         let n = horizon * substeps;
         (
-            n * (4 * self.stage + self.combine) - horizon * self.stage,
+            horizon * (self.first_substep + substeps.saturating_sub(1) * self.later_substep),
             n * (4 * self.stage_dense + self.combine_dense),
         )
+    }
+}
+
+type Pattern = Vec<Vec<bool>>;
+
+/// How a structural non-zero of [∂f/∂x ∂f/∂u] enters the stage kernels.
+enum Coef {
+    /// Identically 1: the term is the factor itself.
+    One,
+    /// A constant: its literal.
+    Literal(TokenStream),
+    /// Computed by `continuous_derivatives`: `jv[index]`.
+    Value(usize),
+}
+
+impl Coef {
+    fn value(&self) -> TokenStream {
+        match self {
+            Coef::One => quote!(1.0),
+            Coef::Literal(l) => l.clone(),
+            Coef::Value(n) => {
+                let n = index(*n);
+                quote!(jv[#n])
+            }
+        }
+    }
+
+    fn times(&self, factor: TokenStream) -> TokenStream {
+        match self {
+            Coef::One => factor,
+            c => {
+                let c = c.value();
+                quote!(#c * #factor)
+            }
+        }
+    }
+}
+
+/// The structural non-zeros of [∂f/∂x ∂f/∂u] by row: (column, coefficient), x columns first.
+struct Jacobian {
+    nx: usize,
+    nz: usize,
+    rows: Vec<Vec<(usize, Coef)>>,
+}
+
+/// Which of the eight stage kernels (docs/discretisation.md).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    /// ACC = D, Y = S + a D with D at Y = S.
+    First,
+    /// ACC += 2 D, Y⁺ = S + a D.
+    Middle,
+    /// S += c (ACC + D).
+    Last,
+}
+
+/// One emitted stage kernel's statements, its multiply-adds and the patterns it leaves.
+struct StageCode {
+    stmts: Vec<TokenStream>,
+    flops: usize,
+    /// Of ACC after the stage.
+    acc: Pattern,
+    /// Of the Y it writes (First, Middle) or of S (Last).
+    out: Pattern,
+}
+
+impl Jacobian {
+    /// Entry (i, j) of D = ∂f/∂x · Y + ∂f/∂u · [0 I] with Y (the array `name`) of pattern `y` (`None`: Y = [I 0],
+    /// D = [∂f/∂x ∂f/∂u], no products), and its multiply-adds; `None` if structurally zero. The terms
+    /// in the order of the dense sum, the ∂f/∂u term last.
+    fn d(&self, i: usize, j: usize, y: Option<&[Vec<bool>]>, name: &TokenStream) -> Option<(TokenStream, usize)> {
+        let Some(y) = y else {
+            return self.rows[i].iter().find(|(k, _)| *k == j).map(|(_, c)| (c.value(), 0));
+        };
+        let (jj, nx) = (index(j), self.nx);
+        let mut terms: Vec<TokenStream> = self.rows[i]
+            .iter()
+            .filter(|(k, _)| *k < nx && y[*k][j])
+            .map(|(k, c)| {
+                let k = index(*k);
+                c.times(quote!(#name[#k][#jj]))
+            })
+            .collect();
+        // A lone coefficient-one term is a copy.
+        let copy = terms.len() == 1
+            && self.rows[i]
+                .iter()
+                .any(|(k, c)| *k < nx && y[*k][j] && matches!(c, Coef::One));
+        let mut flops = if copy { 0 } else { terms.len() };
+        if let Some((_, c)) = self.rows[i].iter().find(|(k, _)| *k == j && j >= nx) {
+            terms.push(c.value());
+            flops += 1;
+        }
+        (!terms.is_empty()).then(|| (quote!(#(#terms)+*), flops))
+    }
+
+    /// The statements of one stage kernel. `s`: the pattern of S (`at_identity`: S = [I 0], not
+    /// read); `y`: of the stage's Y (`None` for the first stage: Y = S); `acc`: of ACC before it
+    /// (ignored by the first stage, which assigns it). Each entry is written from the terms that
+    /// are structurally non-zero, the values those of the dense recursion (a sum with zeros).
+    fn stage(
+        &self,
+        kind: Stage,
+        at_identity: bool,
+        s: &[Vec<bool>],
+        y: Option<&[Vec<bool>]>,
+        acc: &[Vec<bool>],
+    ) -> StageCode {
+        let y = match (kind, at_identity) {
+            (Stage::First, true) => None,
+            (Stage::First, false) => Some(s),
+            _ => y,
+        };
+        let mut stmts = Vec::new();
+        let mut flops = 0;
+        let mut acc_out = if kind == Stage::First {
+            vec![vec![false; self.nz]; self.nx]
+        } else {
+            acc.to_vec()
+        };
+        let mut out = s.to_vec();
+        // Stage 1 reads Y = S itself.
+        let name = if kind == Stage::First { quote!(s) } else { quote!(y) };
+        for i in 0..self.nx {
+            for j in 0..self.nz {
+                let (ii, jj) = (index(i), index(j));
+                let d = self.d(i, j, y, &name);
+                let has_s = s[i][j];
+                // S's entry as a token: read, or the identity's 1 (its 0s are structural).
+                let s_tok = if at_identity { quote!(1.0) } else { quote!(s[#ii][#jj]) };
+                if let Some((expr, f)) = &d {
+                    flops += f;
+                    stmts.push(quote!(let d = #expr;));
+                }
+                match kind {
+                    Stage::First | Stage::Middle => {
+                        if d.is_some() {
+                            if kind == Stage::First {
+                                stmts.push(quote!(acc[#ii][#jj] = d;));
+                            } else if acc[i][j] {
+                                stmts.push(quote!(acc[#ii][#jj] += 2.0 * d;));
+                                flops += 1;
+                            } else {
+                                stmts.push(quote!(acc[#ii][#jj] = 2.0 * d;));
+                                flops += 1;
+                            }
+                            acc_out[i][j] = true;
+                        }
+                        let target = if kind == Stage::First {
+                            quote!(y)
+                        } else {
+                            quote!(y_next)
+                        };
+                        let value = match (has_s, d.is_some()) {
+                            (true, true) => Some(quote!(#s_tok + a * d)),
+                            (true, false) => Some(s_tok),
+                            (false, true) => Some(quote!(a * d)),
+                            (false, false) => None,
+                        };
+                        if let Some(v) = value {
+                            flops += usize::from(d.is_some());
+                            stmts.push(quote!(#target[#ii][#jj] = #v;));
+                            out[i][j] = true;
+                        }
+                    }
+                    Stage::Last => {
+                        let step = match (acc[i][j], d.is_some()) {
+                            (true, true) => Some((quote!(c * (acc[#ii][#jj] + d)), 2)),
+                            (true, false) => Some((quote!(c * acc[#ii][#jj]), 1)),
+                            (false, true) => Some((quote!(c * d), 1)),
+                            (false, false) => None,
+                        };
+                        if let Some((e, f)) = step {
+                            flops += f;
+                            out[i][j] = true;
+                            stmts.push(match (at_identity, has_s) {
+                                (false, _) => quote!(s[#ii][#jj] += #e;),
+                                (true, true) => quote!(s[#ii][#jj] = 1.0 + #e;),
+                                (true, false) => quote!(s[#ii][#jj] = #e;),
+                            });
+                        }
+                    }
+                }
+            }
+        }
+        StageCode {
+            stmts,
+            flops,
+            acc: acc_out,
+            out,
+        }
+    }
+
+    /// The four kernels of a substep from S of pattern `s` (`at_identity`: S = [I 0]), their
+    /// multiply-adds and the pattern of S after it.
+    fn substep(&self, s: &[Vec<bool>], at_identity: bool) -> ([Vec<TokenStream>; 4], usize, Pattern) {
+        let none = vec![vec![false; self.nz]; self.nx];
+        let k1 = self.stage(Stage::First, at_identity, s, None, &none);
+        let k2 = self.stage(Stage::Middle, at_identity, s, Some(&k1.out), &k1.acc);
+        let k3 = self.stage(Stage::Middle, at_identity, s, Some(&k2.out), &k2.acc);
+        let k4 = self.stage(Stage::Last, at_identity, s, Some(&k3.out), &k3.acc);
+        let flops = k1.flops + k2.flops + k3.flops + k4.flops;
+        ([k1.stmts, k2.stmts, k3.stmts, k4.stmts], flops, k4.out)
     }
 }
 
@@ -122,104 +327,69 @@ pub fn emit(
     let jac_stmts = em.take_statements();
     used.extend(em.used_functions());
 
-    // continuous_sensitivity: f and ∂f/∂x·S + ∂f/∂u·[0 I] sharing one DAG walk.
-    let mut em = Emitter::new(g, vars.clone(), float);
-    let sf_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
-    let mut rows = Vec::new();
-    for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {
-        let nz: Vec<(usize, Id)> = rx.iter().copied().enumerate().filter(|(_, d)| !g.is_zero(*d)).collect();
-        let ii = index(i);
-        let row = match nz.as_slice() {
-            [] => quote!(),
-            [(k, d)] if g.is_one(*d) => {
-                let k = index(*k);
-                quote!(ds[#ii] = s[#k];)
-            }
-            _ => {
-                let atoms: Vec<(usize, Option<TokenStream>)> = nz
-                    .iter()
-                    .map(|&(k, d)| (k, if g.is_one(d) { None } else { Some(em.atom(d)) }))
-                    .collect();
-                flops.stage_dense += atoms.len() * nz_count;
-                // Only the columns S may have non-zero, and in each only the products whose
-                // S entry may be non-zero (in the order of the dense sum).
-                let mut stmts = Vec::new();
-                for j in (0..nz_count).filter(|&j| s_pattern[i][j]) {
-                    let jj = index(j);
-                    let terms: Vec<TokenStream> = atoms
-                        .iter()
-                        .filter(|(k, _)| s_pattern[*k][j])
-                        .map(|(k, a)| {
-                            let k = index(*k);
-                            match a {
-                                None => quote!(s[#k][#jj]),
-                                Some(a) => quote!(#a * s[#k][#jj]),
-                            }
-                        })
-                        .collect();
-                    flops.stage += terms.len();
-                    if !terms.is_empty() {
-                        stmts.push(quote!(ds[#ii][#jj] = #(#terms)+*;));
-                    }
-                }
-                quote!(#(#stmts)*)
-            }
-        };
-        let mut extra = Vec::new();
-        for (m, &d) in ru.iter().enumerate() {
-            if !g.is_zero(d) {
-                let a = em.atom(d);
-                let col = index(ir.nx + m);
-                extra.push(quote!(ds[#ii][#col] += #a;));
-                flops.stage += 1;
-                flops.stage_dense += 1;
-            }
-        }
-        rows.push(quote!(#row #(#extra)*));
-    }
-    em.check()?;
-    let s_stmts = em.take_statements();
-
-    // continuous_sensitivity_at_identity: the same at S = [I 0] (the first stage of a sample),
-    // where ∂f/∂x · S + ∂f/∂u · [0 I] = [∂f/∂x ∂f/∂u]: the derivatives themselves, no products.
+    // continuous_derivatives: f and the values of [∂f/∂x ∂f/∂u] the stage kernels read (the
+    // structural non-zeros that are neither 1 nor another constant), sharing one DAG walk.
     let mut em = Emitter::new(g, vars, float);
-    let f0_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
-    let mut first = Vec::new();
-    for (i, (rx, ru)) in ir.fx.iter().zip(&ir.fu).enumerate() {
-        let ii = index(i);
+    let sf_atoms: Vec<TokenStream> = ir.f.iter().map(|&id| em.atom(id)).collect();
+    let mut jv_assign = Vec::new();
+    let mut jac = Jacobian {
+        nx: ir.nx,
+        nz: nz_count,
+        rows: Vec::new(),
+    };
+    for (rx, ru) in ir.fx.iter().zip(&ir.fu) {
+        let mut row = Vec::new();
         for (k, &d) in rx
             .iter()
             .enumerate()
             .chain(ru.iter().enumerate().map(|(m, d)| (ir.nx + m, d)))
         {
-            if !g.is_zero(d) {
-                let a = em.atom(d);
-                let kk = index(k);
-                first.push(quote!(ds[#ii][#kk] = #a;));
+            if g.is_zero(d) {
+                continue;
             }
+            let coef = if g.is_one(d) {
+                Coef::One
+            } else if let Some(v) = g.as_const(d) {
+                Coef::Literal(float_literal(v, float)?)
+            } else {
+                let n = jv_assign.len();
+                let a = em.atom(d);
+                let nn = index(n);
+                jv_assign.push(quote!(jv[#nn] = #a;));
+                Coef::Value(n)
+            };
+            row.push((k, coef));
         }
+        // The dense products (every column) of the code before the columns were specialised.
+        let xs: Vec<&(usize, Coef)> = row.iter().filter(|(k, _)| *k < ir.nx).collect();
+        if !matches!(xs.as_slice(), [] | [(_, Coef::One)]) {
+            flops.stage_dense += xs.len() * nz_count;
+        }
+        flops.stage_dense += row.len() - xs.len();
+        jac.rows.push(row);
     }
     em.check()?;
-    let first_stmts = em.take_statements();
+    let sf_stmts = em.take_statements();
     used.extend(em.used_functions());
+    let nj = index(jv_assign.len());
 
-    let entries: Vec<(proc_macro2::Literal, proc_macro2::Literal)> = (0..ir.nx)
-        .flat_map(|i| {
-            (0..nz_count)
-                .filter(move |&j| s_pattern[i][j])
-                .map(move |j| (index(i), index(j)))
-        })
-        .collect();
-    flops.combine = 7 * entries.len();
+    // The stage kernels: of the first substep of a sample, from S = [I 0] (the patterns the
+    // recursion has from there), and of a later one, over `s_pattern`.
+    let mut identity = vec![vec![false; nz_count]; ir.nx];
+    for (i, row) in identity.iter_mut().enumerate() {
+        row[i] = true;
+    }
+    let ([i1, i2, i3, i4], first_flops, after_first) = jac.substep(&identity, true);
+    let ([g1, g2, g3, g4], later_flops, _) = jac.substep(s_pattern, false);
+    // The generator's propagation (kernels::Structure) covers the first substep's S.
+    debug_assert!(after_first
+        .iter()
+        .flatten()
+        .zip(s_pattern.iter().flatten())
+        .all(|(a, s)| !a || *s));
+    flops.first_substep = first_flops;
+    flops.later_substep = later_flops;
     flops.combine_dense = 7 * ir.nx * nz_count;
-    let axpy: Vec<TokenStream> = entries
-        .iter()
-        .map(|(i, j)| quote!(y[#i][#j] += a * d[#i][#j];))
-        .collect();
-    let step: Vec<TokenStream> = entries
-        .iter()
-        .map(|(i, j)| quote!(s[#i][#j] += c * (d1[#i][#j] + 2.0 * d2[#i][#j] + 2.0 * d3[#i][#j] + d4[#i][#j]);))
-        .collect();
     let pattern_rows = s_pattern.iter().map(|row| quote!([#(#row),*]));
     used.extend(em.used_functions());
     let imports = math_imports(&used);
@@ -250,54 +420,114 @@ pub fn emit(
             (fx, fu)
         }
 
-        /// (f(x, u), ∂f/∂x · S + ∂f/∂u · [0 I]) for a sensitivity S = ∂x/∂(x₀, u):
-        /// one RK4 stage of the forward sensitivity recursion. Rows skip structural zeros of ∂f/∂x.
-        pub fn continuous_sensitivity(x: &[Real; NX], u: &[Real; NU], s: &[[Real; NZ]; NX]) -> ([Real; NX], [[Real; NZ]; NX]) {
-            #binding
-            #(#s_stmts)*
-            let f = [#(#sf_atoms),*];
-            let mut ds = [[0.0; NZ]; NX];
-            #(#rows)*
-            (f, ds)
-        }
+        /// A sensitivity-shaped matrix (NX × NZ): S = ∂x/∂(x₀, u), a stage's S + a D, or the RK4 sum
+        /// D1 + 2 D2 + 2 D3 of a substep.
+        pub type Sens = [[Real; NZ]; NX];
 
-        /// [`continuous_sensitivity`] at S = [I 0] (the first stage of a sample): (f(x, u),
-        /// [∂f/∂x ∂f/∂u]), the derivatives written where the product would have summed them with
-        /// zeros.
-        pub fn continuous_sensitivity_at_identity(x: &[Real; NX], u: &[Real; NU]) -> ([Real; NX], [[Real; NZ]; NX]) {
+        /// Number of values `continuous_derivatives` writes.
+        pub const NJ: usize = #nj;
+
+        /// f(x, u), writing the values of [∂f/∂x ∂f/∂u] the stage kernels read into `jv` (the
+        /// structural non-zeros other than constants, row by row): one walk of the expression graph.
+        pub fn continuous_derivatives(x: &[Real; NX], u: &[Real; NU], jv: &mut [Real; NJ]) -> [Real; NX] {
             #binding
-            #(#first_stmts)*
-            let f = [#(#f0_atoms),*];
-            let mut ds = [[0.0; NZ]; NX];
-            #(#first)*
-            (f, ds)
+            #(#sf_stmts)*
+            #(#jv_assign)*
+            [#(#sf_atoms),*]
         }
 
         /// Structural non-zeros of every sensitivity S = ∂x/∂(x₀, u) of the RK4 recursion (the
         /// generator's propagation of the Jacobian pattern; S = [A B] at the end of a sample).
-        #[allow(dead_code)] // what the two kernels below were specialised to
+        #[allow(dead_code)] // what the later substeps' kernels below were specialised to
         pub const S_PATTERN: [[bool; NZ]; NX] = [#(#pattern_rows),*];
 
-        /// Y = S + a D over `S_PATTERN` (outside it both are zero).
-        #[inline(always)]
-        pub fn sensitivity_axpy(s: &[[Real; NZ]; NX], a: Real, d: &[[Real; NZ]; NX]) -> [[Real; NZ]; NX] {
-            let mut y = *s;
-            #(#axpy)*
-            y
+        // The RK4 stages of one substep (templates/src/model.rs has the dense reference): with
+        // D = ∂f/∂x · Y + ∂f/∂u · [0 I] at the stage's Y, stage 1 (Y = S) sets ACC = D and writes the
+        // next Y = S + a D, stages 2 and 3 add 2 D to ACC and write S + a D, stage 4 updates
+        // S += c (ACC + D). Straight-line code over the entries that may be non-zero: `_at_identity`
+        // for the first substep of a sample (S = [I 0] on entry, not read), the others over S_PATTERN.
+        // Each kernel reads Y and ACC only where the kernel before wrote them.
+
+        /// Stage 1 at S = [I 0]: ACC = D = [∂f/∂x ∂f/∂u], Y = [I 0] + a D.
+        pub fn sensitivity_stage1_at_identity(jv: &[Real; NJ], a: Real, acc: &mut Sens, y: &mut Sens) {
+            #(#i1)*
         }
 
-        /// S += c (D1 + 2 D2 + 2 D3 + D4) over `S_PATTERN`.
-        #[inline(always)]
-        pub fn sensitivity_step(
-            s: &mut [[Real; NZ]; NX],
-            c: Real,
-            d1: &[[Real; NZ]; NX],
-            d2: &[[Real; NZ]; NX],
-            d3: &[[Real; NZ]; NX],
-            d4: &[[Real; NZ]; NX],
-        ) {
-            #(#step)*
+        /// Stage 2 at S = [I 0]: ACC += 2 D, Y⁺ = [I 0] + a D.
+        pub fn sensitivity_stage2_at_identity(jv: &[Real; NJ], y: &Sens, a: Real, acc: &mut Sens, y_next: &mut Sens) {
+            #(#i2)*
+        }
+
+        /// Stage 3 at S = [I 0]: ACC += 2 D, Y⁺ = [I 0] + a D.
+        pub fn sensitivity_stage3_at_identity(jv: &[Real; NJ], y: &Sens, a: Real, acc: &mut Sens, y_next: &mut Sens) {
+            #(#i3)*
+        }
+
+        /// Stage 4 from S = [I 0]: S = [I 0] + c (ACC + D).
+        pub fn sensitivity_stage4_at_identity(jv: &[Real; NJ], y: &Sens, c: Real, acc: &Sens, s: &mut Sens) {
+            #(#i4)*
+        }
+
+        /// Stage 1: ACC = D, Y = S + a D with D at Y = S.
+        pub fn sensitivity_stage1(jv: &[Real; NJ], s: &Sens, a: Real, acc: &mut Sens, y: &mut Sens) {
+            #(#g1)*
+        }
+
+        /// Stage 2: ACC += 2 D, Y⁺ = S + a D.
+        pub fn sensitivity_stage2(jv: &[Real; NJ], y: &Sens, s: &Sens, a: Real, acc: &mut Sens, y_next: &mut Sens) {
+            #(#g2)*
+        }
+
+        /// Stage 3: ACC += 2 D, Y⁺ = S + a D.
+        pub fn sensitivity_stage3(jv: &[Real; NJ], y: &Sens, s: &Sens, a: Real, acc: &mut Sens, y_next: &mut Sens) {
+            #(#g3)*
+        }
+
+        /// Stage 4: S += c (ACC + D).
+        pub fn sensitivity_stage4(jv: &[Real; NJ], y: &Sens, c: Real, acc: &Sens, s: &mut Sens) {
+            #(#g4)*
         }
     };
     Ok((tokens, used, flops))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codegen::kernels::Structure;
+
+    fn pat(rows: &[&[u8]]) -> Pattern {
+        rows.iter().map(|r| r.iter().map(|&v| v != 0).collect()).collect()
+    }
+
+    #[test]
+    fn oscillator_stage_kernels_by_hand() {
+        // ẋ₀ = x₁, ẋ₁ = c(x) x₀ + u: [∂f/∂x ∂f/∂u] = [[0, 1, 0], [jv₀, 0, 1]].
+        let jac = Jacobian {
+            nx: 2,
+            nz: 3,
+            rows: vec![vec![(1, Coef::One)], vec![(0, Coef::Value(0)), (2, Coef::One)]],
+        };
+        let (kernels, flops, after) = jac.substep(&pat(&[&[1, 0, 0], &[0, 1, 0]]), true);
+        // Stage 1: Y₁ = I + a J, 3 entries a·d (the diagonal is copied). Stage 2 (Y₁ full but for
+        // (0, 2)): row 0 copies, row 1 jv₀ y₀ⱼ for j = 0, 1 and the ∂f/∂u term alone for j = 2 (3);
+        // ACC 6, Y 6. Stage 3 (Y₂ full): products 1 + 1 + 2, ACC 6, Y 6. Stage 4: products 4, 2 per
+        // entry of S (6).
+        assert_eq!(flops, 3 + (3 + 6 + 6) + (4 + 6 + 6) + (4 + 12));
+        let structure = Structure::new(
+            &pat(&[&[0, 1], &[1, 0]]),
+            &pat(&[&[0], &[1]]),
+            1,
+            &[1.0, 1.0],
+            &[1.0, 1.0],
+        );
+        assert_eq!(after, structure.s);
+        // The first stage needs no products: the derivatives themselves.
+        let first = kernels[0].iter().map(|t| t.to_string()).collect::<Vec<_>>().join(" ");
+        assert!(!first.contains("= y [") && !first.contains("* y ["), "{first}");
+        // A later substep from the full pattern stays in it.
+        let (_, later, after_later) = jac.substep(&structure.s, false);
+        assert_eq!(after_later, structure.s);
+        assert!(later > flops);
+    }
 }
