@@ -364,8 +364,10 @@ const MAX_RESTARTS: usize = 30;
 /// every one at once after a reference jump mostly frees variables that the next projection
 /// restart fixes again, each at the cost of a row of the factor. With the vectorised kernels
 /// (cheaper rows, cheaper iterations) 16 gave the smallest slowest step of 4, 6, 10 and 16 on the
-/// shipped models (docs/benchmarks.md; 6 before them).
-const RELEASE_CAP: usize = 16;
+/// shipped models (6 before them); with the blocked factorisation (appended rows four at a time)
+/// 32 gives the smallest sum of the two shipped models' slowest steps of 16, 32, 64 and NV
+/// (docs/benchmarks.md, session 10).
+const RELEASE_CAP: usize = 32;
 /// A fresh factorisation orders the free variables last stage first.
 const REVERSED_ORDER: bool = true;
 /// Relative pivot tolerance of the factorisation.
