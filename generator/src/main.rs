@@ -83,11 +83,12 @@ struct BenchArgs {
     /// Also count the instructions of this many trials of the adversarial search under callgrind (0: skip).
     #[arg(long, default_value_t = 0)]
     adversarial: usize,
-    /// Build with -C target-cpu=native (this machine's vector units; callgrind cannot run AVX-512 code, so
-    /// count instructions with --target-cpu x86-64-v3 instead).
+    /// Build with -C target-cpu=native (this machine's vector units; valgrind 3.19 cannot run AVX-512
+    /// code, so count instructions with --target-cpu skylake instead).
     #[arg(long, conflicts_with = "target_cpu")]
     native: bool,
-    /// Build with -C target-cpu=CPU (e.g. x86-64-v3: AVX2 + FMA, which callgrind can count).
+    /// Build with -C target-cpu=CPU (e.g. skylake: AVX2 and FMA units, no AVX-512, which valgrind 3.19
+    /// can count; its x86-64-v3 code contains an encoding valgrind 3.19 rejects).
     #[arg(long, value_name = "CPU")]
     target_cpu: Option<String>,
     #[arg(long, default_value_t = 1)]

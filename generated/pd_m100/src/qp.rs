@@ -1129,8 +1129,12 @@ impl<const NV: usize> BoxQp<NV> {
                     }
                 }
             }
-            chosen.sort_unstable_by_key(|c| c.1);
-            let count = chosen.iter().take_while(|c| c.1 < NV).count();
+            let mut flagged = [false; NV];
+            let mut count = 0;
+            for &(_, j) in chosen.iter().filter(|c| c.1 < NV) {
+                flagged[j % NV] = true;
+                count += 1;
+            }
             if count > 0
                 && !budget.charge(count * NV + rows_cost(nf, (nf + count).min(NV)))
             {
@@ -1139,8 +1143,7 @@ impl<const NV: usize> BoxQp<NV> {
             let mut released = 0;
             fresh = [false; NV];
             let kept = self.free_count();
-            for &(_, j) in chosen.iter().take_while(|c| c.1 < NV) {
-                let j = j % NV;
+            for j in (0..NV).filter(|&j| flagged[j]) {
                 self.free[(kept + released) % NV] = j;
                 self.state[j] = Bound::Free;
                 self.add_fixed(h, j, -v[j]);
