@@ -4,7 +4,7 @@
 
 use crate::kernels;
 use crate::math::sqrt;
-use crate::qp::{BoxQp, QpStatus};
+use crate::qp::{BoxQp, QpResult, QpStatus};
 use crate::rk4::{discrete_dynamics, discrete_linearization_into, hold_sent_inputs, input_to_send, is_sent};
 use crate::{
     Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, MAX_QP_WORK, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION,
@@ -427,6 +427,21 @@ impl Mpc {
     }
 
     /// The previous plan: the input it sends now, nothing changed.
+    /// The box QP from v = 0 (ū is feasible, so 0 is in the box) with the current working set, at
+    /// most `MAX_QP_ITERATIONS` iterations and `max_work` multiply-adds (docs/mpc.md).
+    fn solve_qp(&mut self, max_work: usize) -> QpResult {
+        self.v = [0.0; NV];
+        self.qp.solve(
+            &self.h,
+            &self.g,
+            &self.lo,
+            &self.hi,
+            &mut self.v,
+            MAX_QP_ITERATIONS,
+            max_work,
+        )
+    }
+
     fn keep_plan(&mut self, status: Status) -> Solution {
         Solution {
             u0: clamp_input(&input_to_send(&self.us)),
@@ -519,33 +534,17 @@ impl Mpc {
         }
 
         // Box QP from v = 0 (ū is feasible, so 0 is in the box) with the warm-start working set.
-        self.v = [0.0; NV];
-        let mut result = self.qp.solve(
-            &self.h,
-            &self.g,
-            &self.lo,
-            &self.hi,
-            &mut self.v,
-            MAX_QP_ITERATIONS,
-            MAX_QP_WORK,
-        );
+        let mut result = self.solve_qp(MAX_QP_WORK);
         let mut regularised = regularised;
         if result.status == QpStatus::NotPositiveDefinite {
             // An append found H_FF not numerically positive definite: regularise and solve again.
             match self.factorize_regularised() {
                 true => {
                     regularised = true;
-                    self.v = [0.0; NV];
-                    let again = self.qp.solve(
-                        &self.h,
-                        &self.g,
-                        &self.lo,
-                        &self.hi,
-                        &mut self.v,
-                        MAX_QP_ITERATIONS,
-                        MAX_QP_WORK,
-                    );
+                    // What the first solve spent is not spent again: MAX_QP_WORK bounds both.
+                    let again = self.solve_qp(MAX_QP_WORK.saturating_sub(result.work));
                     result.iterations += again.iterations;
+                    result.work += again.work;
                     result.status = again.status;
                 }
                 false => return self.keep_plan(Status::NumericalFailure),

@@ -7,7 +7,7 @@
 //! The algorithm and its notation are those of docs/mpc.md.
 use crate::kernels;
 use crate::math::sqrt;
-use crate::qp::{BoxQp, QpStatus};
+use crate::qp::{BoxQp, QpResult, QpStatus};
 use crate::rk4::{
     discrete_dynamics, discrete_linearization_into, hold_sent_inputs, input_to_send,
     is_sent,
@@ -388,6 +388,21 @@ impl Mpc {
         self.factorize_regularised().then_some(true)
     }
     /// The previous plan: the input it sends now, nothing changed.
+    /// The box QP from v = 0 (ū is feasible, so 0 is in the box) with the current working set, at
+    /// most `MAX_QP_ITERATIONS` iterations and `max_work` multiply-adds (docs/mpc.md).
+    fn solve_qp(&mut self, max_work: usize) -> QpResult {
+        self.v = [0.0; NV];
+        self.qp
+            .solve(
+                &self.h,
+                &self.g,
+                &self.lo,
+                &self.hi,
+                &mut self.v,
+                MAX_QP_ITERATIONS,
+                max_work,
+            )
+    }
     fn keep_plan(&mut self, status: Status) -> Solution {
         Solution {
             u0: clamp_input(&input_to_send(&self.us)),
@@ -472,36 +487,15 @@ impl Mpc {
                 }
             }
         }
-        self.v = [0.0; NV];
-        let mut result = self
-            .qp
-            .solve(
-                &self.h,
-                &self.g,
-                &self.lo,
-                &self.hi,
-                &mut self.v,
-                MAX_QP_ITERATIONS,
-                MAX_QP_WORK,
-            );
+        let mut result = self.solve_qp(MAX_QP_WORK);
         let mut regularised = regularised;
         if result.status == QpStatus::NotPositiveDefinite {
             match self.factorize_regularised() {
                 true => {
                     regularised = true;
-                    self.v = [0.0; NV];
-                    let again = self
-                        .qp
-                        .solve(
-                            &self.h,
-                            &self.g,
-                            &self.lo,
-                            &self.hi,
-                            &mut self.v,
-                            MAX_QP_ITERATIONS,
-                            MAX_QP_WORK,
-                        );
+                    let again = self.solve_qp(MAX_QP_WORK.saturating_sub(result.work));
                     result.iterations += again.iterations;
+                    result.work += again.work;
                     result.status = again.status;
                 }
                 false => return self.keep_plan(Status::NumericalFailure),
