@@ -40,7 +40,7 @@ pub struct MpcOptions {
     /// Hard cap on active-set iterations per QP (`--qp condensed`).
     pub max_qp_iterations: usize,
     /// Work budget of one QP in multiply-adds (`--qp condensed`; None: NV³ = (N·NU)³, six full
-    /// factorisations of the condensed Hessian). docs/mpc.md, "The work budget".
+    /// factorisations of the condensed Hessian, at most 2³² − 1). docs/mpc.md, "The work budget".
     pub max_qp_work: Option<usize>,
     /// Hard cap on interior-point iterations per QP (`--qp riccati`).
     pub max_ipm_iterations: usize,
@@ -110,10 +110,16 @@ fn default_bound(name: &str) -> f64 {
 }
 
 impl MpcOptions {
-    /// The QP work budget for a horizon of `horizon` samples: the set one or NV³.
+    /// The QP work budget for a horizon of `horizon` samples: the set one or NV³, at most
+    /// [`crate::validate::MPC_MAX_QP_WORK`] (2³² − 1, so that the constant fits a 32-bit target's
+    /// usize).
     pub fn qp_work(&self, horizon: usize) -> usize {
-        let nv = horizon * self.u_min.len();
-        self.max_qp_work.unwrap_or(nv * nv * nv)
+        let nv = (horizon * self.u_min.len()) as u64;
+        let default = nv
+            .saturating_mul(nv)
+            .saturating_mul(nv)
+            .min(crate::validate::MPC_MAX_QP_WORK as u64) as usize;
+        self.max_qp_work.unwrap_or(default)
     }
 
     /// The defaults for `model`: the paper's weights and bounds, except q = 1 on yaw and r = 10

@@ -45,8 +45,9 @@ pub const MPC_BOUND_MAX_ABS: f64 = 1e3;
 pub const MPC_REGULARISATION: (f64, f64) = (0.0, 1.0);
 /// Most QP iterations.
 pub const MPC_MAX_QP_ITERATIONS: usize = 100_000;
-/// Largest accepted QP work budget (multiply-adds per solve).
-pub const MPC_MAX_QP_WORK: usize = 1_000_000_000_000;
+/// Largest accepted QP work budget (multiply-adds per solve): 2³² − 1, the largest a 32-bit
+/// target's usize holds (the constant is emitted as a usize).
+pub const MPC_MAX_QP_WORK: usize = 4_294_967_295;
 
 /// Largest magnitude of any number in a plant file.
 pub const PLANT_MAX_ABS: f64 = 1e6;

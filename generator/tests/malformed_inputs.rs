@@ -602,7 +602,7 @@ fn mpc_cases() -> Vec<Case> {
         ("/max_qp_iterations", json!(1e9), "max_qp_iterations"),
         ("/max_qp_work", json!(0), "max_qp_work"),
         ("/max_qp_work", json!(-5), "max_qp_work"),
-        ("/max_qp_work", json!(10_000_000_000_000u64), "max_qp_work"),
+        ("/max_qp_work", json!(4_294_967_296u64), "max_qp_work"),
         ("/regularisation", json!(-1e-9), "regularisation"),
         ("/regularisation", json!(2), "regularisation"),
         ("/u_max", json!("wide"), "u_max"),

@@ -59,8 +59,8 @@ pub const INPUT_LEAD: [usize; NU] = [4, 0, 0, 0];
 /// Hard cap on active-set iterations per QP.
 pub const MAX_QP_ITERATIONS: usize = 200;
 /// Work budget of one QP solve in multiply-adds (`max_qp_work`; default NV³, six full
-/// factorisations of the condensed Hessian): the QP stops with `IterationCap` at a feasible iterate
-/// rather than exceed it.
+/// factorisations of the condensed Hessian, at most 2³² − 1): the QP stops with `IterationCap` at a
+/// feasible iterate rather than exceed it.
 pub const MAX_QP_WORK: usize = 1728000;
 /// Hard cap on interior-point iterations per QP of the stage-wise (Riccati) solver.
 pub const MAX_IPM_ITERATIONS: usize = 30;

@@ -71,9 +71,12 @@ impl Budget {
     }
 }
 /// Multiply-adds of rows `from..to` of a Cholesky factor (Σ i²/2 for the substitutions and i
-/// for the pivots, bounded above).
+/// for the pivots, bounded above); in u64, saturated to usize (a 32-bit usize cannot hold NV³ for
+/// NV > 1625).
 const fn rows_cost(from: usize, to: usize) -> usize {
-    (to * to * to - from * from * from) / 6 + to * to
+    let (f, t) = (from as u64, to as u64);
+    let cost = (t * t * t).saturating_sub(f * f * f) / 6 + t * t;
+    if cost > usize::MAX as u64 { usize::MAX } else { cost as usize }
 }
 /// Workspace of the active-set solver for `NV` variables (no allocation).
 #[derive(Clone, Debug)]
@@ -499,7 +502,8 @@ impl<const NV: usize> BoxQp<NV> {
         let (mut by_rotations, mut dropped, mut first) = (0usize, 0usize, nf);
         for i in 0..nf {
             if self.state[self.var(i)] != Bound::Free {
-                by_rotations += (nf * nf - i * i) / 2 + 3 * (nf - i) * (nf - i);
+                by_rotations = by_rotations
+                    .saturating_add((nf * nf - i * i) / 2 + 3 * (nf - i) * (nf - i));
                 dropped += 1;
                 first = first.min(i);
             }
@@ -1025,8 +1029,8 @@ impl<const NV: usize> BoxQp<NV> {
                 self.rhs[i] = -(g[var] + self.fixed_gradient[var]);
             }
             self.solve_factored();
-            let restart_bound = 2 * nf * nf + nf * NV
-                + rows_cost(0, nf).max(7 * nf * nf);
+            let restart_bound = (2 * nf * nf + nf * NV)
+                .saturating_add(rows_cost(0, nf).max(7 * nf * nf));
             if restarts < MAX_RESTARTS && budget.fits(restart_bound)
                 && budget.charge(2 * nf * nf)
                 && self.try_projection_restart(h, lo, hi, v)
@@ -1037,7 +1041,7 @@ impl<const NV: usize> BoxQp<NV> {
                     - (0..nf)
                         .filter(|&i| self.state[self.var(i)] == Bound::Free)
                         .count();
-                budget.charge(fixed * NV + self.drop_plan().1);
+                budget.charge((fixed * NV).saturating_add(self.drop_plan().1));
                 if self.drop_fixed(h).is_err() {
                     return QpResult {
                         status: QpStatus::NotPositiveDefinite,
@@ -1078,7 +1082,7 @@ impl<const NV: usize> BoxQp<NV> {
                         - (0..nf)
                             .filter(|&i| self.state[self.var(i)] == Bound::Free)
                             .count();
-                    if !budget.charge(fixed * NV + self.drop_plan().1) {
+                    if !budget.charge((fixed * NV).saturating_add(self.drop_plan().1)) {
                         return capped(iterations, &budget);
                     }
                     if self.drop_fixed(h).is_err() {
@@ -1136,7 +1140,10 @@ impl<const NV: usize> BoxQp<NV> {
                 count += 1;
             }
             if count > 0
-                && !budget.charge(count * NV + rows_cost(nf, (nf + count).min(NV)))
+                && !budget
+                    .charge(
+                        (count * NV).saturating_add(rows_cost(nf, (nf + count).min(NV))),
+                    )
             {
                 return capped(iterations, &budget);
             }
