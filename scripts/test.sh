@@ -31,7 +31,10 @@ cargo build --release -q --target thumbv7em-none-eabihf \
 
 echo "== the C ABI staticlib builds for thumbv7em-none-eabihf (docs/c-api.md)"
 cargo build --release -q --target thumbv7em-none-eabihf -p sindy_m100_capi
-capi=target/thumbv7em-none-eabihf/release/libsindy_m100_capi.a
+# Where cargo puts the workspace's builds (CARGO_TARGET_DIR, relative to the repository, or target/),
+# made absolute for make -C below.
+target_dir=$(realpath -m "${CARGO_TARGET_DIR:-target}")
+capi=$target_dir/thumbv7em-none-eabihf/release/libsindy_m100_capi.a
 test -s "$capi" || { echo "$capi was not built" >&2; exit 1; }
 if command -v llvm-nm >/dev/null; then
     # The symbol table once (a `grep -q` on the pipe would stop llvm-nm early: SIGPIPE under pipefail).
@@ -46,8 +49,8 @@ if command -v llvm-nm >/dev/null; then
 fi
 if command -v arm-none-eabi-gcc >/dev/null && command -v make >/dev/null; then
     # A freestanding C program for Cortex-M7 (hard-float EABI) links against it, with no panic path.
-    make -s -C examples/c cortex-m
-    if grep -qi panic <<<"$(arm-none-eabi-nm target/c-example/cortex_m.elf)"; then
+    make -s -C examples/c cortex-m CARGO_TARGET_DIR="$target_dir"
+    if grep -qi panic <<<"$(arm-none-eabi-nm "$target_dir/c-example/cortex_m.elf")"; then
         echo "examples/c/cortex_m.c: a panic path is linked in" >&2
         exit 1
     fi
@@ -56,7 +59,8 @@ else
 fi
 
 echo "== firmware example links a generated solver (thumbv7em-none-eabihf, panic = abort)"
-(cd runtime/firmware-example && cargo build --release -q)
+# Its own target directory (its own workspace and profile), whatever CARGO_TARGET_DIR says.
+(cd runtime/firmware-example && cargo build --release -q --target-dir target)
 if command -v llvm-nm >/dev/null; then
     for bin in sindy_m100 pd_hover_f32; do
         elf=runtime/firmware-example/target/thumbv7em-none-eabihf/release/$bin
