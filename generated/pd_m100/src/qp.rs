@@ -78,6 +78,16 @@ const fn rows_cost(from: usize, to: usize) -> usize {
     let cost = (t * t * t).saturating_sub(f * f * f) / 6 + t * t;
     if cost > usize::MAX as u64 { usize::MAX } else { cost as usize }
 }
+/// How [`BoxQp::drop_fixed`] drops the variables that are no longer free ([`BoxQp::drop_plan`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct DropPlan {
+    /// By rotations (one deletion each) rather than by recomputing the rows after the first.
+    by_rotations: bool,
+    /// Upper bound of the multiply-adds of the way taken.
+    cost: usize,
+    /// Free positions no longer free.
+    dropped: usize,
+}
 /// Workspace of the active-set solver for `NV` variables (no allocation).
 #[derive(Clone, Debug)]
 pub struct BoxQp<const NV: usize> {
@@ -468,10 +478,14 @@ impl<const NV: usize> BoxQp<NV> {
     /// Drop the variables that are no longer free from the factor, keeping the
     /// order of the others. The rows before the first dropped position are
     /// unchanged (the leading block of H_FF is), so only the rows from there
-    /// on are recomputed.
-    fn drop_fixed(&mut self, h: &[[Real; NV]; NV]) -> Result<(), QpStatus> {
+    /// on are recomputed. `plan`: [`Self::drop_plan`] for the current working set.
+    fn drop_fixed(
+        &mut self,
+        h: &[[Real; NV]; NV],
+        plan: DropPlan,
+    ) -> Result<(), QpStatus> {
         let nf = self.free_count();
-        if self.drop_plan().0 {
+        if plan.by_rotations {
             for i in (0..nf).rev() {
                 if self.state[self.var(i)] != Bound::Free {
                     self.remove(i);
@@ -493,11 +507,11 @@ impl<const NV: usize> BoxQp<NV> {
         self.nf = kept;
         self.factor_rows(h, first)
     }
-    /// How [`Self::drop_fixed`] will drop the variables that are no longer free, and an upper
+    /// How [`Self::drop_fixed`] is to drop the variables that are no longer free, and an upper
     /// bound of its multiply-adds: removing position p by rotations moves the rows below it and
     /// rotates the trailing block, ≤ (nf² − p²)/2 + 3 (nf − p)²; recomputing rows first..nf'
-    /// costs ≤ [`rows_cost`]. The cheaper way is taken: (by rotations, cost).
-    fn drop_plan(&self) -> (bool, usize) {
+    /// costs ≤ [`rows_cost`]. The cheaper way is taken.
+    fn drop_plan(&self) -> DropPlan {
         let nf = self.free_count();
         let (mut by_rotations, mut dropped, mut first) = (0usize, 0usize, nf);
         for i in 0..nf {
@@ -511,9 +525,17 @@ impl<const NV: usize> BoxQp<NV> {
         let kept = nf - dropped;
         if by_rotations < (kept * kept * kept).saturating_sub(first * first * first) / 6
         {
-            (true, by_rotations)
+            DropPlan {
+                by_rotations: true,
+                cost: by_rotations,
+                dropped,
+            }
         } else {
-            (false, rows_cost(first.min(kept), kept))
+            DropPlan {
+                by_rotations: false,
+                cost: rows_cost(first.min(kept), kept),
+                dropped,
+            }
         }
     }
     /// Rows `from..nf` of the Cholesky factor of H_FF, rows before `from` given.
@@ -1037,12 +1059,9 @@ impl<const NV: usize> BoxQp<NV> {
             {
                 restarts += 1;
                 fresh = [false; NV];
-                let fixed = nf
-                    - (0..nf)
-                        .filter(|&i| self.state[self.var(i)] == Bound::Free)
-                        .count();
-                budget.charge((fixed * NV).saturating_add(self.drop_plan().1));
-                if self.drop_fixed(h).is_err() {
+                let plan = self.drop_plan();
+                budget.charge((plan.dropped * NV).saturating_add(plan.cost));
+                if self.drop_fixed(h, plan).is_err() {
                     return QpResult {
                         status: QpStatus::NotPositiveDefinite,
                         iterations,
@@ -1078,14 +1097,11 @@ impl<const NV: usize> BoxQp<NV> {
             }
             if let Some((p, bound)) = blocking {
                 if alpha == 0.0 && self.fix_degenerate(h, lo, hi, v, &mut fresh) {
-                    let fixed = nf
-                        - (0..nf)
-                            .filter(|&i| self.state[self.var(i)] == Bound::Free)
-                            .count();
-                    if !budget.charge((fixed * NV).saturating_add(self.drop_plan().1)) {
+                    let plan = self.drop_plan();
+                    if !budget.charge((plan.dropped * NV).saturating_add(plan.cost)) {
                         return capped(iterations, &budget);
                     }
-                    if self.drop_fixed(h).is_err() {
+                    if self.drop_fixed(h, plan).is_err() {
                         return QpResult {
                             status: QpStatus::NotPositiveDefinite,
                             iterations,

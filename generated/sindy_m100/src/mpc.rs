@@ -387,7 +387,6 @@ impl Mpc {
         }
         self.factorize_regularised().then_some(true)
     }
-    /// The previous plan: the input it sends now, nothing changed.
     /// The box QP from v = 0 (ū is feasible, so 0 is in the box) with the current working set, at
     /// most `MAX_QP_ITERATIONS` iterations and `max_work` multiply-adds (docs/mpc.md).
     fn solve_qp(&mut self, max_work: usize) -> QpResult {
@@ -403,6 +402,7 @@ impl Mpc {
                 max_work,
             )
     }
+    /// The previous plan: the input it sends now, nothing changed.
     fn keep_plan(&mut self, status: Status) -> Solution {
         Solution {
             u0: clamp_input(&input_to_send(&self.us)),
