@@ -22,6 +22,8 @@ pub struct MpcOptionsFile {
     pub max_qp_work: Option<usize>,
     pub max_ipm_iterations: Option<usize>,
     pub regularisation: Option<f64>,
+    pub disturbance_gain: Option<f64>,
+    pub disturbance_max_acceleration: Option<f64>,
 }
 
 /// Validated options for one model.
@@ -46,6 +48,31 @@ pub struct MpcOptions {
     pub max_ipm_iterations: usize,
     /// Added to the condensed Hessian's diagonal.
     pub regularisation: f64,
+    /// Gain of the runtime's disturbance observer (0 = off; docs/mpc.md, "Offset-free tracking").
+    pub disturbance_gain: f64,
+    /// Bound of the estimated disturbance acceleration on vx, vy, vz (m/s²).
+    pub disturbance_max_acceleration: f64,
+}
+
+/// Default gain of the disturbance observer: each fresh measurement moves the estimate by 0.3 of
+/// the velocity rows' one-sample prediction error (a time constant of about 3 samples, 0.1 s at
+/// 30 Hz). On plants/m100_like.json it removes the slowly turning bias the shipped models leave on
+/// the spiral and the circle (unmodelled drag, tilt gains): docs/validation.md, "Offset-free
+/// tracking"; 0.05–0.8 were measured, 0.2–0.5 within 0.001 m of each other.
+pub const DEFAULT_DISTURBANCE_GAIN: f64 = 0.3;
+
+/// Default bound of the estimated disturbance acceleration (m/s²): the m100_like plant's drag is
+/// 0.5 m/s² at the spiral's 6 m/s; a model's transient errors in a 3.6 m approach at the tilt bound
+/// reach 1.7 m/s², which the bound keeps out of the estimate.
+pub const DEFAULT_DISTURBANCE_MAX_ACCELERATION: f64 = 1.0;
+
+/// The states whose one-sample prediction error the disturbance observer integrates: the world-frame
+/// velocities, by name.
+pub fn disturbance_rows(states: &[String]) -> Vec<bool> {
+    states
+        .iter()
+        .map(|s| matches!(s.as_str(), "vx" | "vy" | "vz"))
+        .collect()
 }
 
 /// Default cap on the Riccati interior-point iterations of one QP. Typical steps of the shipped
@@ -137,7 +164,25 @@ impl MpcOptions {
             max_qp_work: None,
             max_ipm_iterations: DEFAULT_MAX_IPM_ITERATIONS,
             regularisation: 1e-9,
+            disturbance_gain: DEFAULT_DISTURBANCE_GAIN,
+            disturbance_max_acceleration: DEFAULT_DISTURBANCE_MAX_ACCELERATION,
         }
+    }
+
+    /// Per-sample bound of each state's disturbance eᵢ (x⁺ = F(x, u) + e): the maximum acceleration
+    /// times `dt` on the rows of [`disturbance_rows`], 0 (not estimated) elsewhere and everywhere
+    /// when the gain is 0.
+    pub fn disturbance_bound(&self, states: &[String], dt: f64) -> Vec<f64> {
+        disturbance_rows(states)
+            .into_iter()
+            .map(|on| {
+                if on && self.disturbance_gain > 0.0 {
+                    self.disturbance_max_acceleration * dt
+                } else {
+                    0.0
+                }
+            })
+            .collect()
     }
 
     /// Defaults overridden by `file`, validated; `label` names the file in errors.
@@ -218,6 +263,14 @@ impl MpcOptions {
         let regularisation = file.regularisation.unwrap_or(d.regularisation);
         crate::validate::within(regularisation, crate::validate::MPC_REGULARISATION, "")
             .map_err(|m| format!("{label}: regularisation: {m}"))?;
+        let disturbance_gain = file.disturbance_gain.unwrap_or(d.disturbance_gain);
+        crate::validate::within(disturbance_gain, (0.0, 1.0), "")
+            .map_err(|m| format!("{label}: disturbance_gain: {m}"))?;
+        let disturbance_max_acceleration = file
+            .disturbance_max_acceleration
+            .unwrap_or(d.disturbance_max_acceleration);
+        crate::validate::within(disturbance_max_acceleration, (0.0, 100.0), "m/s²")
+            .map_err(|m| format!("{label}: disturbance_max_acceleration: {m}"))?;
         Ok(Self {
             q,
             q_terminal,
@@ -229,6 +282,8 @@ impl MpcOptions {
             max_qp_work: file.max_qp_work,
             max_ipm_iterations,
             regularisation,
+            disturbance_gain,
+            disturbance_max_acceleration,
         })
     }
 

@@ -306,6 +306,8 @@ where
             });
         }
         let state_ok = x0.iter().all(|v| v.is_finite());
+        // A disturbance observer's update (crate::disturbance), before it predicts with it.
+        self.predictor.measure(x0);
         // The state when this sample's input takes effect (x0 itself without delays).
         self.predicted = self.predictor.predict(x0);
         let mut solution = self.solver.feedback(&self.predicted);
@@ -416,6 +418,10 @@ where
                 }
             }
             Err(_) => {}
+        }
+        if let Some(e) = self.predictor.disturbance() {
+            // Refused only if not finite, which the observer never estimates.
+            let _ = self.solver.set_disturbance(e);
         }
         let status = self.solver.prepare(&self.window);
         self.prepared = true;

@@ -23,6 +23,7 @@
 //! Delays are whole samples: `INPUT_DELAY` rounded at generation; the rest (at most DT/2) is not
 //! compensated.
 
+use crate::disturbance::DisturbanceObserver;
 use crate::Real;
 
 /// Something that maps the measured state to the state the MPC should solve from, given the
@@ -39,6 +40,14 @@ pub trait StatePredictor<R, const NX: usize, const NU: usize> {
     /// many samples after the current time.
     fn lookahead(&self) -> usize {
         0
+    }
+    /// The measurement of the current sample, before `predict` (a disturbance observer's update;
+    /// nothing by default).
+    fn measure(&mut self, _x: &[R; NX]) {}
+    /// The disturbance e of x⁺ = F(x, u) + e the solver should predict with, if the predictor
+    /// estimates one (crate::disturbance; none by default).
+    fn disturbance(&self) -> Option<&[R; NX]> {
+        None
     }
 }
 
@@ -79,7 +88,9 @@ impl core::fmt::Display for DelayTooLong {
 }
 
 /// The delay compensator of the module docs: the last `D` inputs sent (a fixed array, no
-/// allocation) and the discrete dynamics `F` (a generated crate's `discrete_dynamics`).
+/// allocation) and the discrete dynamics `F` (a generated crate's `discrete_dynamics`); with
+/// [`with_disturbance_observer`](Self::with_disturbance_observer) also the disturbance observer of
+/// crate::disturbance, whose estimate e then enters its prediction (F(x, u) + e) and the solver's.
 ///
 /// ```
 /// use uavgen_runtime::{DelayCompensator, StatePredictor};
@@ -97,6 +108,7 @@ pub struct DelayCompensator<R, F, const NX: usize, const NU: usize, const D: usi
     delays: [usize; NU],
     /// history[j]: the input sent j + 1 samples ago.
     history: [[R; NU]; D],
+    observer: Option<DisturbanceObserver<R, NX>>,
 }
 
 /// The delays and the history (the dynamics are a function and are not shown).
@@ -107,6 +119,7 @@ impl<R: core::fmt::Debug, F, const NX: usize, const NU: usize, const D: usize> c
         f.debug_struct("DelayCompensator")
             .field("delays", &self.delays)
             .field("history", &self.history)
+            .field("observer", &self.observer)
             .finish_non_exhaustive()
     }
 }
@@ -133,7 +146,34 @@ where
             dynamics,
             delays,
             history: [initial; D],
+            observer: None,
         })
+    }
+
+    /// The same compensator running a disturbance observer with `gain` and the per-sample `bound`
+    /// (a generated crate's `DISTURBANCE_GAIN`, `DISTURBANCE_BOUND`; crate::disturbance). With a
+    /// gain of 0 or no positive bound it estimates nothing and the solver is never told a
+    /// disturbance.
+    pub fn with_disturbance_observer(mut self, gain: R, bound: [R; NX]) -> Self {
+        let observer = DisturbanceObserver::new(gain, bound);
+        self.observer = observer.is_active().then_some(observer);
+        self
+    }
+
+    /// The disturbance observer, if it runs one.
+    pub fn observer(&self) -> Option<&DisturbanceObserver<R, NX>> {
+        self.observer.as_ref()
+    }
+
+    /// F(x, u) + e (e = the observer's estimate, 0 without one).
+    fn step(&self, x: &[R; NX], u: &[R; NU]) -> [R; NX] {
+        let mut next = (self.dynamics)(x, u);
+        if let Some(obs) = &self.observer {
+            for (n, e) in next.iter_mut().zip(obs.estimate()) {
+                *n += *e;
+            }
+        }
+        next
     }
 
     /// The delays in samples.
@@ -176,11 +216,12 @@ where
     R: Real,
     F: Fn(&[R; NX], &[R; NU]) -> [R; NX],
 {
-    /// x̂_D from the measured x (module docs). No shared delay: `x` itself.
+    /// x̂_D from the measured x (module docs), with the observer's e added at every step. No
+    /// shared delay: `x` itself.
     fn predict(&self, x: &[R; NX]) -> [R; NX] {
         let mut xm = *x;
         for m in 0..self.shared_delay() {
-            xm = (self.dynamics)(&xm, &self.active(m));
+            xm = self.step(&xm, &self.active(m));
         }
         xm
     }
@@ -190,10 +231,35 @@ where
         if let Some(first) = self.history.first_mut() {
             *first = *u;
         }
+        if let Some(obs) = self.observer.as_mut() {
+            // Over the sample that just ended channel i was driven by the input sent dᵢ samples
+            // before it: dᵢ + 1 samples ago now (the oldest kept if the history is shorter).
+            let mut acted = [R::ZERO; NU];
+            for (i, (a, &d)) in acted.iter_mut().zip(&self.delays).enumerate() {
+                let sent = self.history.get(d).or(self.history.last());
+                if let Some(v) = sent.and_then(|s| s.get(i)) {
+                    *a = *v;
+                }
+            }
+            obs.advance(&self.dynamics, &acted);
+        }
     }
 
     fn reset(&mut self, u: &[R; NU]) {
         self.history = [*u; D];
+        if let Some(obs) = self.observer.as_mut() {
+            obs.reset();
+        }
+    }
+
+    fn measure(&mut self, x: &[R; NX]) {
+        if let Some(obs) = self.observer.as_mut() {
+            obs.measure(x);
+        }
+    }
+
+    fn disturbance(&self) -> Option<&[R; NX]> {
+        self.observer.as_ref().map(DisturbanceObserver::estimate)
     }
 
     fn lookahead(&self) -> usize {

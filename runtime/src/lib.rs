@@ -54,12 +54,14 @@
 
 pub mod controller;
 pub mod delay;
+pub mod disturbance;
 mod real;
 pub mod reference;
 pub mod solver;
 
 pub use controller::{ControlError, ControlErrorKind, Controller, CycleCounter, CycleStats, NoCycleCounter, Timings};
 pub use delay::{DelayCompensator, DelayTooLong, NoDelay, StatePredictor};
+pub use disturbance::DisturbanceObserver;
 pub use real::Real;
 pub use reference::{
     ConstantReference, FnReference, Interpolation, ReferenceError, ReferenceSource, SetpointBuffer, SetpointError,

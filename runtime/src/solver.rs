@@ -80,6 +80,11 @@ pub trait MpcSolver<R: Real, const NX: usize, const NU: usize, const N1: usize> 
     fn feedback(&mut self, x0: &[R; NX]) -> Solution<R, NU>;
     /// Shift the guess by one sample.
     fn shift(&mut self);
+    /// Predict with the disturbance e (x⁺ = F(x, u) + e) from the next `prepare` on; false if the
+    /// solver does not take one (the default) or refused it (a non-finite value).
+    fn set_disturbance(&mut self, _e: &[R; NX]) -> bool {
+        false
+    }
 }
 
 impl<R, S, const NX: usize, const NU: usize, const N1: usize> MpcSolver<R, NX, NU, N1> for &mut S
@@ -102,6 +107,9 @@ where
     }
     fn shift(&mut self) {
         S::shift(self)
+    }
+    fn set_disturbance(&mut self, e: &[R; NX]) -> bool {
+        S::set_disturbance(self, e)
     }
 }
 
@@ -211,6 +219,10 @@ macro_rules! mpc_adapter {
             #[inline]
             fn shift(&mut self) {
                 self.0.shift()
+            }
+            #[inline]
+            fn set_disturbance(&mut self, e: &[$krate::Real; $krate::NX]) -> bool {
+                self.0.set_disturbance(e)
             }
         }
     };

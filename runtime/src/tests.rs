@@ -804,6 +804,7 @@ mod fake_generated {
         pub reference: [[Real; NX]; N + 1],
         pub shifts: usize,
         pub calls: usize,
+        pub disturbance: [Real; NX],
     }
 
     impl Mpc {
@@ -814,6 +815,7 @@ mod fake_generated {
                 reference: [[0.0; NX]; N + 1],
                 shifts: 0,
                 calls: 0,
+                disturbance: [0.0; NX],
             }
         }
         pub fn initialize(&mut self, x0: &[Real; NX], u: &[Real; NU]) {
@@ -843,6 +845,10 @@ mod fake_generated {
         }
         pub fn shift(&mut self) {
             self.shifts += 1;
+        }
+        pub fn set_disturbance(&mut self, e: &[Real; NX]) -> bool {
+            self.disturbance = *e;
+            true
         }
         pub fn planned_inputs(&self) -> &[[Real; NU]; N] {
             &self.inputs
@@ -903,4 +909,73 @@ fn mpc_adapter_forwards_and_converts() {
     let w: [[f32; 12]; 6] = *c.reference_window();
     assert_eq!(adapter.inner().reference, w);
     assert_eq!(adapter.inner().shifts, 1);
+}
+
+/// Records the disturbance it was told at every `prepare`.
+struct DisturbedSolver {
+    told: [f64; NX],
+    prepared_with: Vec<[f64; NX]>,
+}
+
+impl MpcSolver<f64, NX, NU, N1> for DisturbedSolver {
+    const DT: f64 = DT;
+    const U_MIN: [f64; NU] = U_MIN;
+    const U_MAX: [f64; NU] = U_MAX;
+    fn initialize(&mut self, _x0: &[f64; NX], _u: &[f64; NU]) {}
+    fn prepare(&mut self, _reference: &[[f64; NX]; N1]) -> Status {
+        self.prepared_with.push(self.told);
+        Status::Solved
+    }
+    fn feedback(&mut self, _x0: &[f64; NX]) -> Solution<f64, NU> {
+        Solution {
+            u0: [0.0; NU],
+            status: Status::Solved,
+            qp_iterations: 1,
+            cost: 0.0,
+        }
+    }
+    fn shift(&mut self) {}
+    fn set_disturbance(&mut self, e: &[f64; NX]) -> bool {
+        self.told = *e;
+        true
+    }
+}
+
+#[test]
+fn the_controller_tells_the_solver_the_observers_disturbance() {
+    // The model says the state stays put; the aircraft's vx grows by 0.05 m/s every sample (a
+    // constant 0.5 m/s² the model lacks), and every third measurement repeats the one before.
+    let model = |x: &[f64; NX], _u: &[f64; NU]| *x;
+    let mut bound = [0.0; NX];
+    bound[6] = 0.1;
+    let predictor = DelayCompensator::<f64, _, NX, NU, 4>::new(model, [2, 1, 1, 3], [0.0; NU])
+        .unwrap()
+        .with_disturbance_observer(0.5, bound);
+    let solver = DisturbedSolver {
+        told: [f64::NAN; NX],
+        prepared_with: Vec::new(),
+    };
+    let mut c = Controller::new(solver, ConstantReference([0.0; NX])).with_delay_compensation(predictor);
+    c.start(0.0).unwrap();
+    let mut x = [0.0; NX];
+    let mut shown = x;
+    for k in 0..60 {
+        if k % 3 != 2 {
+            shown = x;
+        }
+        c.feedback(&shown).unwrap();
+        c.prepare_next().unwrap();
+        x[6] += 0.05;
+    }
+    let told = c.solver().prepared_with.last().copied().unwrap();
+    assert!((told[6] - 0.05).abs() < 1e-9, "told {told:?}");
+    assert!(told.iter().enumerate().all(|(i, v)| i == 6 || *v == 0.0));
+    // The prediction over the shared delay (1 sample) includes it.
+    let e = c.delay_compensator().disturbance().unwrap();
+    assert_eq!(e[6], told[6]);
+    // Without an observer the solver is never told anything.
+    let plain = DelayCompensator::<f64, _, NX, NU, 4>::new(model, [0; NU], [0.0; NU])
+        .unwrap()
+        .with_disturbance_observer(0.0, bound);
+    assert!(plain.observer().is_none() && plain.disturbance().is_none());
 }

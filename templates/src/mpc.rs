@@ -91,6 +91,8 @@ pub struct Mpc {
     g0: [Real; NV],
     qp: BoxQp<NV>,
     phase: Phase,
+    /// The disturbance e of the prediction x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e (`set_disturbance`; 0 until set).
+    disturbance: [Real; NX],
 }
 
 /// Component of each QP variable (stage k, input r: `kernels::INPUT_COMPONENT[r]`).
@@ -174,6 +176,7 @@ impl Mpc {
             g0: [0.0; NV],
             qp: BoxQp::new(),
             phase: Phase::Stale,
+            disturbance: [0.0; NX],
         }
     }
 
@@ -203,6 +206,23 @@ impl Mpc {
         // the guess: it stays.
         self.phase = Phase::Stale;
         true
+    }
+
+    /// Predict with the disturbance e from the next `prepare` on: x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e at every
+    /// stage (offset-free tracking: the runtime's `DisturbanceObserver` estimates e; docs/mpc.md).
+    /// A constant e leaves Aₖ and Bₖ as they are and moves the defects only. Returns false,
+    /// changing nothing, if a value is not finite.
+    pub fn set_disturbance(&mut self, e: &[Real; NX]) -> bool {
+        if !all_finite(e) {
+            return false;
+        }
+        self.disturbance = *e;
+        true
+    }
+
+    /// The disturbance e the prediction uses (`set_disturbance`).
+    pub fn disturbance(&self) -> &[Real; NX] {
+        &self.disturbance
     }
 
     /// Planned inputs ū₀..ū_{N−1} of the current guess.
@@ -265,7 +285,11 @@ impl Mpc {
         let rollout = !self.xs[1..].iter().all(within_trust_region);
         let mut finite = true;
         for k in 0..N {
-            let next = discrete_linearization_into(&self.xs[k], &self.us[k], &mut self.a[k], &mut self.b[k]);
+            // Fₖ + e: the prediction of the stage (e = 0 unless `set_disturbance`).
+            let mut next = discrete_linearization_into(&self.xs[k], &self.us[k], &mut self.a[k], &mut self.b[k]);
+            for i in 0..NX {
+                next[i] += self.disturbance[i];
+            }
             if rollout {
                 self.xs[k + 1] = into_trust_region(&next);
             }
@@ -643,7 +667,10 @@ impl Mpc {
         for k in 0..N - 1 {
             self.us[k] = self.us[k + 1];
         }
-        let last = discrete_dynamics(&self.xs[N - 1], &self.us[N - 1]);
+        let mut last = discrete_dynamics(&self.xs[N - 1], &self.us[N - 1]);
+        for i in 0..NX {
+            last[i] += self.disturbance[i];
+        }
         self.xs[N] = if all_finite(&last) { last } else { self.xs[N - 1] };
         self.qp.shift_working_set(NU);
         self.phase = Phase::Stale;
@@ -743,6 +770,60 @@ mod tests {
         for k in 0..N {
             let next = discrete_dynamics(&xs[k], &mpc.planned_inputs()[k]);
             assert!((next[0] - xs[k + 1][0]).abs() < 1e-12 && (next[1] - xs[k + 1][1]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn a_disturbance_enters_every_predicted_state() {
+        // With e set, the converged plan's states follow x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e (the model is linear:
+        // the second RTI step is the exact solution).
+        let mut mpc = Mpc::new();
+        let e = [0.01, -0.02];
+        assert!(mpc.set_disturbance(&e));
+        assert!(!mpc.set_disturbance(&[Real::NAN, 0.0]), "a NaN is refused");
+        assert_eq!(mpc.disturbance(), &e);
+        let x0 = [0.1, 0.0];
+        mpc.solve(&x0, &reference(0.5));
+        assert_eq!(mpc.solve(&x0, &reference(0.5)).status, Status::Solved);
+        let xs = mpc.predicted_states();
+        for k in 0..N {
+            let next = discrete_dynamics(&xs[k], &mpc.planned_inputs()[k]);
+            for i in 0..NX {
+                assert!((next[i] + e[i] - xs[k + 1][i]).abs() < 1e-9, "stage {k}, state {i}");
+            }
+        }
+        // shift extends the plan with the same prediction.
+        mpc.shift();
+        let xs = mpc.predicted_states();
+        let last = discrete_dynamics(&xs[N - 1], &mpc.planned_inputs()[N - 1]);
+        assert!((last[1] + e[1] - xs[N][1]).abs() < 1e-12);
+    }
+
+    #[test]
+    fn with_the_plants_disturbance_the_plan_predicts_the_plant() {
+        // The plant is the model plus a constant disturbance d. Told d, the MPC's one-step
+        // prediction is the plant's next state; not told, it is off by d every sample.
+        let d = [0.0, 0.03];
+        for told in [true, false] {
+            let mut mpc = Mpc::new();
+            if told {
+                mpc.set_disturbance(&d);
+            }
+            let mut x = [0.0, 0.0];
+            let mut miss: Real = 0.0;
+            for _ in 0..100 {
+                let s = mpc.solve(&x, &reference(0.5));
+                let predicted = mpc.predicted_states()[1];
+                let plant = discrete_dynamics(&x, &s.u0);
+                x = [plant[0] + d[0], plant[1] + d[1]];
+                miss = (predicted[1] - x[1]).abs();
+                mpc.shift();
+            }
+            if told {
+                assert!(miss < 1e-9, "told: one-step miss {miss:e}");
+            } else {
+                assert!((miss - d[1]).abs() < 1e-6, "not told: one-step miss {miss:e}");
+            }
         }
     }
 

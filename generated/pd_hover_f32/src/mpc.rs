@@ -93,6 +93,8 @@ pub struct Mpc {
     g0: [Real; NV],
     qp: BoxQp<NV>,
     phase: Phase,
+    /// The disturbance e of the prediction x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e (`set_disturbance`; 0 until set).
+    disturbance: [Real; NX],
 }
 /// Component of each QP variable (stage k, input r: `kernels::INPUT_COMPONENT[r]`).
 #[allow(clippy::modulo_one)]
@@ -167,6 +169,7 @@ impl Mpc {
             g0: [0.0; NV],
             qp: BoxQp::new(),
             phase: Phase::Stale,
+            disturbance: [0.0; NX],
         }
     }
     /// Guess x̄ₖ = x0 for all k and ūₖ = u (clamped into the bounds); ignored if not finite.
@@ -192,6 +195,21 @@ impl Mpc {
         }
         self.phase = Phase::Stale;
         true
+    }
+    /// Predict with the disturbance e from the next `prepare` on: x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e at every
+    /// stage (offset-free tracking: the runtime's `DisturbanceObserver` estimates e; docs/mpc.md).
+    /// A constant e leaves Aₖ and Bₖ as they are and moves the defects only. Returns false,
+    /// changing nothing, if a value is not finite.
+    pub fn set_disturbance(&mut self, e: &[Real; NX]) -> bool {
+        if !all_finite(e) {
+            return false;
+        }
+        self.disturbance = *e;
+        true
+    }
+    /// The disturbance e the prediction uses (`set_disturbance`).
+    pub fn disturbance(&self) -> &[Real; NX] {
+        &self.disturbance
     }
     /// Planned inputs ū₀..ū_{N−1} of the current guess.
     pub fn planned_inputs(&self) -> &[[Real; NU]; N] {
@@ -245,12 +263,15 @@ impl Mpc {
         let rollout = !self.xs[1..].iter().all(within_trust_region);
         let mut finite = true;
         for k in 0..N {
-            let next = discrete_linearization_into(
+            let mut next = discrete_linearization_into(
                 &self.xs[k],
                 &self.us[k],
                 &mut self.a[k],
                 &mut self.b[k],
             );
+            for i in 0..NX {
+                next[i] += self.disturbance[i];
+            }
             if rollout {
                 self.xs[k + 1] = into_trust_region(&next);
             }
@@ -600,7 +621,10 @@ impl Mpc {
         for k in 0..N - 1 {
             self.us[k] = self.us[k + 1];
         }
-        let last = discrete_dynamics(&self.xs[N - 1], &self.us[N - 1]);
+        let mut last = discrete_dynamics(&self.xs[N - 1], &self.us[N - 1]);
+        for i in 0..NX {
+            last[i] += self.disturbance[i];
+        }
         self.xs[N] = if all_finite(&last) { last } else { self.xs[N - 1] };
         self.qp.shift_working_set(NU);
         self.phase = Phase::Stale;

@@ -74,6 +74,12 @@ pub fn read(crate_dir: &Path) -> Result<CrateDims, String> {
             max_ipm_iterations: scalar("MAX_IPM_ITERATIONS")
                 .map_or(crate::mpc_options::DEFAULT_MAX_IPM_ITERATIONS, |v| v as usize),
             regularisation: scalar("REGULARISATION")?,
+            // Crates generated before the disturbance observer have no such constants (gain 0: off).
+            disturbance_gain: scalar("DISTURBANCE_GAIN").unwrap_or(0.0),
+            disturbance_max_acceleration: match (get("DISTURBANCE_BOUND"), scalar("DT")) {
+                (Ok(b), Ok(dt)) if dt > 0.0 => b.iter().copied().fold(0.0, f64::max) / dt,
+                _ => 0.0,
+            },
         },
     })
 }

@@ -57,6 +57,7 @@ pub fn dims_values(
             Ok(quote!(Real::NEG_INFINITY))
         }
     };
+    let disturbance_bound = mpc.disturbance_bound(&ir.state_names, 1.0 / options.rate_hz);
     let ranges = options.envelope.plausibility_ranges(&ir.state_names, declared);
     let lo = ranges.iter().map(|r| bound(r.0)).collect::<Result<Vec<_>, _>>()?;
     let hi = ranges.iter().map(|r| bound(r.1)).collect::<Result<Vec<_>, _>>()?;
@@ -82,6 +83,8 @@ pub fn dims_values(
         ("ENVELOPE_LO", quote!([#(#lo),*])),
         ("ENVELOPE_HI", quote!([#(#hi),*])),
         ("REGULARISATION", float_literal(mpc.regularisation, options.float)?),
+        ("DISTURBANCE_GAIN", float_literal(mpc.disturbance_gain, options.float)?),
+        ("DISTURBANCE_BOUND", array(&disturbance_bound)?),
     ]))
 }
 

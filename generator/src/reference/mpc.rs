@@ -673,6 +673,8 @@ mod tests {
                 max_qp_work: None,
                 max_ipm_iterations: 30,
                 regularisation,
+                disturbance_gain: 0.0,
+                disturbance_max_acceleration: 0.0,
             },
         }
     }

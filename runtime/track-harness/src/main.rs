@@ -16,7 +16,9 @@
 //!
 //! A model with input delays (`corrections.latency`, the crate's `INPUT_DELAY_SAMPLES`) is
 //! compensated by the runtime's `DelayCompensator`: the MPC solves from the state predicted over the
-//! delay with the inputs already sent.
+//! delay with the inputs already sent. The compensator also runs the crate's disturbance observer
+//! (`DISTURBANCE_GAIN`, `DISTURBANCE_BOUND`; offset-free tracking, docs/mpc.md), whose estimate the
+//! controller hands to the MPC before every preparation.
 
 use std::io::{BufRead, Write};
 use std::time::Instant;
@@ -86,8 +88,9 @@ fn handle<'a>(line: &str, solver: &mut Option<&'a mut Solver>, ctl: &mut Option<
                 None => solver.take().ok_or("no solver")?,
             };
             let dynamics: Dynamics = solver::discrete_dynamics;
-            let predictor =
-                DelayCompensator::new(dynamics, solver::INPUT_DELAY_SAMPLES, u).map_err(|e| format!("{e:?}"))?;
+            let predictor = DelayCompensator::new(dynamics, solver::INPUT_DELAY_SAMPLES, u)
+                .map_err(|e| format!("{e:?}"))?
+                .with_disturbance_observer(solver::DISTURBANCE_GAIN, solver::DISTURBANCE_BOUND);
             let mut c = Controller::new(s, traj).with_delay_compensation(predictor);
             c.initialize(&x0, &u);
             let status = c.start(rest[0]).map_err(|e| format!("reference: {e}"))?;
