@@ -198,6 +198,7 @@ fn sizes_fit_the_header() {
             c_ints(&sindy_m100::INPUT_DELAY_SAMPLES)
         ),
         format!("#define SINDY_M100_INPUT_LEAD {}", c_ints(&sindy_m100::INPUT_LEAD)),
+        format!("#define SINDY_M100_DISTURBANCE_GAIN {:?}", sindy_m100::DISTURBANCE_GAIN),
     ] {
         assert!(header.contains(&line), "the header lacks {line:?}");
     }
@@ -282,6 +283,26 @@ fn the_abi_refuses_bad_pointers_and_changes_nothing() {
             status::INVALID_INPUT
         );
         assert!((0..NU).all(|i| out[i] >= U_MIN[i] && out[i] <= U_MAX[i]));
+        // The disturbance: NULL and NaN refused, a finite one taken as the Rust API takes it.
+        let mut e = [0.0; NX];
+        e[6] = 0.02;
+        assert_eq!(
+            capi::sindy_m100_set_disturbance(storage, core::ptr::null()),
+            status::NULL_POINTER
+        );
+        let mut nan = e;
+        nan[7] = Real::NAN;
+        assert_eq!(
+            capi::sindy_m100_set_disturbance(storage, nan.as_ptr()),
+            status::INVALID_INPUT
+        );
+        assert_eq!(capi::sindy_m100_set_disturbance(storage, e.as_ptr()), status::OK);
+        assert!(mpc.set_disturbance(&e));
+        assert_eq!(
+            capi::sindy_m100_solve(storage, x0.as_ptr(), window.as_ptr().cast(), out.as_mut_ptr()),
+            status::SOLVED
+        );
+        assert_eq!(out, mpc.solve(&x0, &window).u0);
         // Unaligned arrays are fine: they are copied with unaligned reads.
         let mut bytes = vec![0u8; NX * 8 + 1];
         let unaligned = bytes.as_mut_ptr().add(1).cast::<Real>();

@@ -330,6 +330,28 @@ pub unsafe extern "C" fn uavgen_model_shift(storage: *mut c_void) -> i32 {
     })())
 }
 
+/// `Mpc::set_disturbance(e)`: predict with x_{k+1} = F(x_k, u_k) + e from the next `prepare` on
+/// (offset-free tracking); `INVALID_INPUT`, changing nothing, if a value is not finite.
+///
+/// # Safety
+/// `storage` as for `set_guess`; `e` is NULL or points to NX readable `Real`s.
+#[no_mangle]
+pub unsafe extern "C" fn uavgen_model_set_disturbance(storage: *mut c_void, e: *const Real) -> i32 {
+    code((|| {
+        // SAFETY: by the contract.
+        let slot = unsafe { initialised(storage)? };
+        // SAFETY: by the contract.
+        let e: [Real; NX] = unsafe { read(slot, e)? };
+        // SAFETY: from `initialised`, and the only reference.
+        let slot = unsafe { solver(slot) };
+        Ok(if slot.mpc.set_disturbance(&e) {
+            status::OK
+        } else {
+            status::INVALID_INPUT
+        })
+    })())
+}
+
 /// The solver for reading.
 ///
 /// # Safety

@@ -52,10 +52,17 @@ extern "C" {
  * docs/runtime.md, "Input delays". */
 #define SINDY_M100_INPUT_DELAY_SAMPLES { 4, 0, 0, 0 }
 #define SINDY_M100_INPUT_LEAD { 4, 0, 0, 0 }
+/* Offset-free tracking: the disturbance observer's gain L and its bound b[i] on |e_i| per sample
+ * (initialiser of sindy_m100_real[SINDY_M100_NX]; 0: state i not estimated). At each fresh measurement x (one
+ * that differs from the last), m samples after the last, with x_hat the prediction
+ * x_hat = F(x_hat, u_acted) + e run from it: e_i = clamp(e_i + L (x_i - x_hat_i) / m, -b_i, b_i);
+ * then sindy_m100_set_disturbance(e) before the next prepare. uavgen's docs/mpc.md, "Offset-free tracking". */
+#define SINDY_M100_DISTURBANCE_GAIN 0.3
+#define SINDY_M100_DISTURBANCE_BOUND { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.03333333333333333, 0.03333333333333333, 0.03333333333333333, 0.0, 0.0, 0.0 }
 
 /* Caller-owned solver storage: an upper bound of the solver's size (sindy_m100_storage_size() returns
  * the exact size) and its alignment. */
-#define SINDY_M100_STORAGE_SIZE 314368
+#define SINDY_M100_STORAGE_SIZE 314432
 #define SINDY_M100_STORAGE_ALIGN 16
 
 typedef double sindy_m100_real;
@@ -114,6 +121,11 @@ sindy_m100_status sindy_m100_solve(sindy_m100_storage *storage, const sindy_m100
 
 /* Move the guess and the stored reference one sample ahead (call after applying u0, before the next prepare). */
 sindy_m100_status sindy_m100_shift(sindy_m100_storage *storage);
+
+/* Predict with x_{k+1} = F(x_k, u_k) + e from the next prepare on: offset-free tracking, e estimated
+ * by the caller's disturbance observer (DISTURBANCE_GAIN, DISTURBANCE_BOUND above). INVALID_INPUT,
+ * changing nothing, if a value is not finite. */
+sindy_m100_status sindy_m100_set_disturbance(sindy_m100_storage *storage, const sindy_m100_real e[SINDY_M100_NX]);
 
 /* The latest feedback/solve: its status, input, QP iterations and cost. Before the first,
  * last_status returns NO_SOLUTION and the others return it without writing anything. */

@@ -16,7 +16,7 @@
 //! (e.g. `panic-halt`) in every Rust user of the crate.
 //!
 //! The ABI uses only the public API of `Mpc` (`new`, `initialize`, `set_guess`, `prepare`,
-//! `feedback`, `solve`, `shift`, `planned_inputs`, `predicted_states`) and `discrete_dynamics`.
+//! `feedback`, `solve`, `shift`, `set_disturbance`, `planned_inputs`, `predicted_states`) and `discrete_dynamics`.
 
 use super::{Float, GenerateOptions};
 use crate::model::Model;
@@ -85,14 +85,14 @@ pub const STATUS_CODES: &[(&str, i32, &str)] = &[
 ///
 /// The generator does not compile the crate, so it cannot know `size_of::<Mpc>()` exactly; the
 /// bound counts the solver's arrays (guess, reference, linearisation, condensing chains, condensed
-/// QP, the QP's factor and vectors: 3(N+1)NX + N·NU + N·NX² + 2·N·NX·NU + N·NX + 2·NV² + 12·NV
-/// reals, the last 4 NV spare) plus 8-byte words for index arrays and flags, rounded up to 64. `capi/src/lib.rs`
+/// QP, the QP's factor and vectors, the disturbance: 3(N+1)NX + N·NU + N·NX² + 2·N·NX·NU + N·NX +
+/// 2·NV² + 12·NV + NX reals, the last 4 NV spare) plus 8-byte words for index arrays and flags, rounded up to 64. `capi/src/lib.rs`
 /// asserts at compile time that the solver fits, so a solver that outgrows the bound fails to
 /// build instead of overrunning the caller's buffer; `<name>_storage_size()` returns the exact
 /// size at run time.
 pub fn storage_bound(nx: usize, nu: usize, n: usize, float: Float) -> usize {
     let nv = n * nu;
-    let reals = 3 * (n + 1) * nx + n * nu + n * nx * nx + 2 * n * nx * nu + n * nx + 2 * nv * nv + 12 * nv;
+    let reals = 3 * (n + 1) * nx + n * nu + n * nx * nx + 2 * n * nx * nu + n * nx + 2 * nv * nv + 12 * nv + nx;
     let real = match float {
         Float::F64 => 8,
         Float::F32 => 4,
@@ -284,6 +284,13 @@ extern "C" {{
  * docs/runtime.md, "Input delays". */
 #define {up}_INPUT_DELAY_SAMPLES {delay_samples}
 #define {up}_INPUT_LEAD {input_lead}
+/* Offset-free tracking: the disturbance observer's gain L and its bound b[i] on |e_i| per sample
+ * (initialiser of {p}_real[{up}_NX]; 0: state i not estimated). At each fresh measurement x (one
+ * that differs from the last), m samples after the last, with x_hat the prediction
+ * x_hat = F(x_hat, u_acted) + e run from it: e_i = clamp(e_i + L (x_i - x_hat_i) / m, -b_i, b_i);
+ * then {p}_set_disturbance(e) before the next prepare. uavgen's docs/mpc.md, "Offset-free tracking". */
+#define {up}_DISTURBANCE_GAIN {disturbance_gain}
+#define {up}_DISTURBANCE_BOUND {disturbance_bound}
 
 /* Caller-owned solver storage: an upper bound of the solver's size ({p}_storage_size() returns
  * the exact size) and its alignment. */
@@ -323,6 +330,11 @@ enum {p}_status_code {{
             u_max = c_array(&self.mpc.u_max, float),
             delay_samples = int_array(&delay_samples),
             input_lead = int_array(&input_lead),
+            disturbance_gain = c_float(self.mpc.disturbance_gain, float),
+            disturbance_bound = c_array(
+                &self.mpc.disturbance_bound(&model.states, 1.0 / self.options.rate_hz),
+                float
+            ),
             align = STORAGE_ALIGN,
             codes = STATUS_CODES
                 .iter()
@@ -363,6 +375,13 @@ enum {p}_status_code {{
             (
                 "Move the guess and the stored reference one sample ahead (call after applying u0, before the next prepare).".into(),
                 format!("{st} {p}_shift({s} *storage);"),
+            ),
+            (
+                "Predict with x_{k+1} = F(x_k, u_k) + e from the next prepare on: offset-free tracking, e estimated\n\
+                 by the caller's disturbance observer (DISTURBANCE_GAIN, DISTURBANCE_BOUND above). INVALID_INPUT,\n\
+                 changing nothing, if a value is not finite."
+                    .into(),
+                format!("{st} {p}_set_disturbance({s} *storage, const {r} e[{up}_NX]);"),
             ),
             (
                 "The latest feedback/solve: its status, input, QP iterations and cost. Before the first,\n\

@@ -120,6 +120,8 @@ pub struct GenericMpc {
     /// Each input's lead over the shared delay (the generated crate's `INPUT_LEAD`, at most N − 1):
     /// input j's stages k < lead[j] were sent already and are held (docs/mpc.md "Input delays").
     lead: Vec<usize>,
+    /// The disturbance e of the prediction x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e (`set_disturbance`; 0 until set).
+    disturbance: Vec<f64>,
     /// u₋₁: the input applied over the sample before stage 0 (the input-rate term's start).
     u_prev: Vec<f64>,
 }
@@ -154,9 +156,21 @@ impl GenericMpc {
             trust: Envelope::default().trust_bounds(&ir.state_names),
             lead: ir.input_lead(problem.dt).into_iter().map(|l| l.min(n - 1)).collect(),
             u_prev: vec![0.0; nu],
+            disturbance: vec![0.0; nx],
             ir,
             problem,
         }
+    }
+
+    /// Predict with x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e from the next step on (the generated `Mpc::set_disturbance`,
+    /// docs/mpc.md "Offset-free tracking"). Returns false, changing nothing, if `e` has the wrong
+    /// length or a non-finite value.
+    pub fn set_disturbance(&mut self, e: &[f64]) -> bool {
+        if e.len() != self.ir.nx || !e.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        self.disturbance.copy_from_slice(e);
+        true
     }
 
     /// Guess x̄ₖ = x0 for all k, ūₖ = u for all k.
@@ -209,6 +223,9 @@ impl GenericMpc {
         }
         let p = &self.problem;
         self.x_guess[n] = discrete_step(&self.ir, &self.x_guess[n - 1], &self.u_guess[n - 1], p.dt, p.substeps);
+        for (x, e) in self.x_guess[n].iter_mut().zip(&self.disturbance) {
+            *x += e;
+        }
     }
 
     /// Full-step Gauss-Newton SQP at a fixed x₀: repeat [`Self::rti_step`]
@@ -354,7 +371,11 @@ impl GenericMpc {
             c: vec![],
         };
         for k in 0..p.horizon {
-            let (f, a, b) = discrete_linearization(&self.ir, &self.x_guess[k], &self.u_guess[k], p.dt, p.substeps);
+            let (mut f, a, b) = discrete_linearization(&self.ir, &self.x_guess[k], &self.u_guess[k], p.dt, p.substeps);
+            // Fₖ + e (e = 0 unless `set_disturbance`).
+            for (fi, e) in f.iter_mut().zip(&self.disturbance) {
+                *fi += e;
+            }
             if rollout {
                 // Projected onto the trust region at every stage, as the generated solver does.
                 for ((x, fi), bound) in self.x_guess[k + 1].iter_mut().zip(&f).zip(trust) {

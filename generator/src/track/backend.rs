@@ -169,7 +169,9 @@ impl Drop for HarnessBackend {
 /// round(d/Δt), the MPC solves from the state predicted over the delay every channel shares
 /// (D = the smallest) with the inputs already sent, and its reference window starts D samples
 /// ahead; the solver holds each channel's inputs already sent beyond D (its lead) and sends the
-/// one planned at the lead (docs/mpc.md "Input delays").
+/// one planned at the lead (docs/mpc.md "Input delays"). It runs the runtime's disturbance observer
+/// too (uavgen-runtime's `DisturbanceObserver`, its estimate handed to the solver at the same points
+/// of the timeline as the harness's `Controller` does: docs/mpc.md "Offset-free tracking").
 pub struct GenericBackend {
     mpc: GenericMpc,
     options: MpcOptions,
@@ -180,6 +182,60 @@ pub struct GenericBackend {
     /// Input delay per channel in samples, and the inputs sent, the latest first (D of them).
     delays: Vec<usize>,
     history: Vec<Vec<f64>>,
+    observer: Observer,
+}
+
+/// F(x, u) with the MPC's own model and substeps (the crate's `discrete_dynamics` in the harness).
+fn model_step(mpc: &GenericMpc, x: &[f64], u: &[f64]) -> Vec<f64> {
+    let p = mpc.problem();
+    crate::discretize::discrete_step(mpc.ir(), x, u, p.dt, p.substeps)
+}
+
+/// uavgen-runtime's `DisturbanceObserver` (runtime/src/disturbance.rs) over a state of run-time
+/// length: e ← clamp(e + L (x − x̂)/m, ±b) at each fresh measurement, x̂ ← F(x̂, u) + e per sample.
+struct Observer {
+    gain: f64,
+    bound: Vec<f64>,
+    estimate: Vec<f64>,
+    predicted: Vec<f64>,
+    last: Option<Vec<f64>>,
+    gap: u32,
+}
+
+impl Observer {
+    fn active(&self) -> bool {
+        self.gain > 0.0 && self.bound.iter().any(|b| *b > 0.0)
+    }
+
+    fn measure(&mut self, x: &[f64]) {
+        if !self.active() || !x.iter().all(|v| v.is_finite()) || self.last.as_deref() == Some(x) {
+            return;
+        }
+        if self.last.is_some() && (1..=uavgen_runtime::disturbance::MAX_GAP).contains(&self.gap) {
+            let m = self.gap as f64;
+            for i in 0..x.len() {
+                let step = self.gain * (x[i] - self.predicted[i]) / m;
+                if self.bound[i] > 0.0 && step.is_finite() {
+                    self.estimate[i] = (self.estimate[i] + step).clamp(-self.bound[i], self.bound[i]);
+                }
+            }
+        }
+        self.last = Some(x.to_vec());
+        self.predicted = x.to_vec();
+        self.gap = 0;
+    }
+
+    fn advance(&mut self, next: impl Fn(&[f64]) -> Vec<f64>) {
+        if self.last.is_none() || self.gap > uavgen_runtime::disturbance::MAX_GAP {
+            return;
+        }
+        let mut x = next(&self.predicted);
+        for (xi, e) in x.iter_mut().zip(&self.estimate) {
+            *xi += e;
+        }
+        self.predicted = x;
+        self.gap += 1;
+    }
 }
 
 impl GenericBackend {
@@ -191,6 +247,16 @@ impl GenericBackend {
             options: options.clone(),
         };
         let delays = crate::ir::delay_samples(&model.input_delays(), dt);
+        let nx = model.nx();
+        let bound = options.disturbance_bound(&model.states, dt);
+        let observer = Observer {
+            gain: options.disturbance_gain,
+            bound,
+            estimate: vec![0.0; nx],
+            predicted: vec![0.0; nx],
+            last: None,
+            gap: 0,
+        };
         Self {
             mpc: GenericMpc::new(ModelIr::new(model), problem),
             options,
@@ -200,6 +266,7 @@ impl GenericBackend {
             nx: model.nx(),
             delays,
             history: Vec::new(),
+            observer,
         }
     }
 
@@ -222,9 +289,10 @@ impl GenericBackend {
                     self.history.get(age - 1).map_or(0.0, |h| h[i])
                 })
                 .collect();
-            // The MPC's own model and substeps (the crate's `discrete_dynamics` in the harness).
-            let p = self.mpc.problem();
-            xm = crate::discretize::discrete_step(self.mpc.ir(), &xm, &u, p.dt, p.substeps);
+            xm = model_step(&self.mpc, &xm, &u);
+            for (x, e) in xm.iter_mut().zip(&self.observer.estimate) {
+                *x += e;
+            }
         }
         xm
     }
@@ -259,14 +327,21 @@ impl Backend for GenericBackend {
         self.trajectory = trajectory;
         self.t = t0;
         self.mpc.initialize(x0, u);
-        // The inputs sent over the largest delay (the prediction reaches back that far).
-        self.history = vec![u.to_vec(); self.delays.iter().copied().max().unwrap_or(0)];
+        // The inputs sent over the largest delay and one more (the prediction reaches back over the
+        // delay; the observer needs the input that acted over the sample before).
+        self.history = vec![u.to_vec(); self.delays.iter().copied().max().unwrap_or(0) + 1];
+        let nx = self.nx;
+        self.observer.estimate = vec![0.0; nx];
+        self.observer.last = None;
+        self.observer.gap = 0;
+        self.mpc.set_disturbance(&vec![0.0; nx]);
         Ok(())
     }
 
     fn step(&mut self, x: &[f64]) -> Result<StepAnswer, String> {
         let reference = self.window();
         let start = Instant::now();
+        self.observer.measure(x);
         let x = self.predict(x);
         let result = self.mpc.rti_step(&x, &reference);
         let elapsed = start.elapsed().as_nanos() as f64;
@@ -289,9 +364,19 @@ impl Backend for GenericBackend {
                 v.clamp(lo, hi)
             })
             .collect();
-        if !self.history.is_empty() {
-            self.history.rotate_right(1);
-            self.history[0] = u.clone();
+        self.history.rotate_right(1);
+        self.history[0] = u.clone();
+        // Over the sample that ends now channel i was driven by the input sent dᵢ samples before it.
+        let acted: Vec<f64> = self
+            .delays
+            .iter()
+            .enumerate()
+            .map(|(i, &d)| self.history[d][i])
+            .collect();
+        let mpc = &self.mpc;
+        self.observer.advance(|x| model_step(mpc, x, &acted));
+        if self.observer.active() {
+            self.mpc.set_disturbance(&self.observer.estimate);
         }
         Ok(StepAnswer {
             u,

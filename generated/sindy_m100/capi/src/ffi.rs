@@ -58,7 +58,7 @@ pub mod status {
 
 /// `<NAME>_STORAGE_SIZE`: an upper bound of [`storage_size`](sindy_m100_storage_size), computed by
 /// the generator from the sizes alone.
-pub const STORAGE_SIZE: usize = 314368;
+pub const STORAGE_SIZE: usize = 314432;
 /// `<NAME>_STORAGE_ALIGN`.
 pub const STORAGE_ALIGN: usize = 16;
 
@@ -357,6 +357,28 @@ pub unsafe extern "C" fn sindy_m100_shift(storage: *mut c_void) -> i32 {
         // SAFETY: from `initialised`, and the only reference.
         unsafe { solver(slot) }.mpc.shift();
         Ok(status::OK)
+    })())
+}
+
+/// `Mpc::set_disturbance(e)`: predict with x_{k+1} = F(x_k, u_k) + e from the next `prepare` on
+/// (offset-free tracking); `INVALID_INPUT`, changing nothing, if a value is not finite.
+///
+/// # Safety
+/// `storage` as for `set_guess`; `e` is NULL or points to NX readable `Real`s.
+#[no_mangle]
+pub unsafe extern "C" fn sindy_m100_set_disturbance(storage: *mut c_void, e: *const Real) -> i32 {
+    code((|| {
+        // SAFETY: by the contract.
+        let slot = unsafe { initialised(storage)? };
+        // SAFETY: by the contract.
+        let e: [Real; NX] = unsafe { read(slot, e)? };
+        // SAFETY: from `initialised`, and the only reference.
+        let slot = unsafe { solver(slot) };
+        Ok(if slot.mpc.set_disturbance(&e) {
+            status::OK
+        } else {
+            status::INVALID_INPUT
+        })
     })())
 }
 
