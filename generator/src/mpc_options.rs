@@ -54,12 +54,14 @@ pub struct MpcOptions {
     pub disturbance_max_acceleration: f64,
 }
 
-/// Default gain of the disturbance observer: each fresh measurement moves the estimate by 0.3 of
-/// the velocity rows' one-sample prediction error (a time constant of about 3 samples, 0.1 s at
-/// 30 Hz). On plants/m100_like.json it removes the slowly turning bias the shipped models leave on
-/// the spiral and the circle (unmodelled drag, tilt gains): docs/validation.md, "Offset-free
-/// tracking"; 0.05–0.8 were measured, 0.2–0.5 within 0.001 m of each other.
-pub const DEFAULT_DISTURBANCE_GAIN: f64 = 0.3;
+/// Default gain of the disturbance observer: each fresh measurement moves the estimate by half of
+/// the velocity rows' one-sample prediction error (a time constant of about two samples). On
+/// plants/m100_like.json it removes the slowly turning bias the shipped models leave on the spiral
+/// and the circle (unmodelled drag, tilt gains). Slower observers (0.05–0.3) leave a model that lacks
+/// its plant's command delay oscillating on the sinusoid (a nominal-plant model on
+/// plants/effects/latency.json: 0.43–0.51 m against 0.29 m without an observer); 0.5 improves on no
+/// observer in every case measured (docs/validation.md, "Offset-free tracking").
+pub const DEFAULT_DISTURBANCE_GAIN: f64 = 0.5;
 
 /// Default bound of the estimated disturbance acceleration (m/s²): the m100_like plant's drag is
 /// 0.5 m/s² at the spiral's 6 m/s; a model's transient errors in a 3.6 m approach at the tilt bound

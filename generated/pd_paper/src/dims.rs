@@ -120,7 +120,7 @@ pub const REGULARISATION: Real = 0.000000001;
 /// Gain of the runtime's disturbance observer (`disturbance_gain`, 0 = off): each fresh
 /// measurement moves the estimate e by this share of its one-sample prediction error
 /// (docs/mpc.md, "Offset-free tracking").
-pub const DISTURBANCE_GAIN: Real = 0.3;
+pub const DISTURBANCE_GAIN: Real = 0.5;
 /// Bound of each state's disturbance |eᵢ| per sample (x⁺ = F(x, u) + e): the
 /// `disturbance_max_acceleration` times DT on vx, vy, vz; 0 where no disturbance is estimated.
 pub const DISTURBANCE_BOUND: [Real; NX] = [

@@ -57,7 +57,7 @@ extern "C" {
  * that differs from the last), m samples after the last, with x_hat the prediction
  * x_hat = F(x_hat, u_acted) + e run from it: e_i = clamp(e_i + L (x_i - x_hat_i) / m, -b_i, b_i);
  * then sindy_m100_set_disturbance(e) before the next prepare. uavgen's docs/mpc.md, "Offset-free tracking". */
-#define SINDY_M100_DISTURBANCE_GAIN 0.3
+#define SINDY_M100_DISTURBANCE_GAIN 0.5
 #define SINDY_M100_DISTURBANCE_BOUND { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.03333333333333333, 0.03333333333333333, 0.03333333333333333, 0.0, 0.0, 0.0 }
 
 /* Caller-owned solver storage: an upper bound of the solver's size (sindy_m100_storage_size() returns
