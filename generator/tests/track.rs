@@ -315,26 +315,32 @@ fn models_identified_on_m100_like_track_every_trajectory_within_the_bounds() {
     }
 }
 
-#[test]
-fn offset_free_tracking_removes_most_of_the_shipped_models_late_bias() {
-    // docs/validation.md "Offset-free tracking": the shipped SINDy model on plants/m100_like.json
-    // leaves a growing bias on the circle (second-half RMSE 0.123 m measured without the observer);
-    // the default observer (disturbance_gain 0.5) brings it to 0.071 m.
-    let tmp = tempfile::tempdir().unwrap();
-    let off = tmp.path().join("off.json");
+/// `track` of `model` on `plant` along `trajectory` for `seconds`, with the default observer and
+/// with `{"disturbance_gain": 0}`: the two reports (default first), each checked for bounds.
+fn with_and_without_the_observer(
+    dir: &std::path::Path,
+    model: &str,
+    plant: &str,
+    trajectory: &str,
+    seconds: &str,
+) -> [serde_json::Value; 2] {
+    let off = dir.join("off.json");
     fs::write(&off, r#"{"disturbance_gain": 0}"#).unwrap();
-    let work = tmp.path().join("work");
-    let mut late = Vec::new();
-    for mpc in [None, Some(&off)] {
-        let out = tmp.path().join(if mpc.is_some() { "off" } else { "default" });
+    let work = dir.join("work");
+    [None, Some(&off)].map(|mpc| {
+        let out = dir.join(if mpc.is_some() { "off" } else { "default" });
         let mut args = vec![
             "track",
             "--model",
-            "models/sindy_m100.json",
+            model,
             "--plant",
-            "plants/m100_like.json",
+            plant,
             "--trajectory",
-            "circle",
+            trajectory,
+            "--duration",
+            seconds,
+            "--max-rmse",
+            "inf",
             "--out",
             out.to_str().unwrap(),
             "--work-dir",
@@ -348,8 +354,24 @@ fn offset_free_tracking_removes_most_of_the_shipped_models_late_bias() {
         let r = report(&out);
         assert_eq!(r["inputs_out_of_bounds"], 0);
         assert_eq!(r["chattering"], false);
-        late.push(r["overall_second_half"]["rmse"].as_f64().unwrap());
-    }
+        r
+    })
+}
+
+#[test]
+fn offset_free_tracking_removes_most_of_the_shipped_models_late_bias() {
+    // docs/validation.md "Offset-free tracking": the shipped SINDy model on plants/m100_like.json
+    // leaves a growing bias on the circle (second-half RMSE 0.123 m measured without the observer);
+    // the default observer (disturbance_gain 0.5) brings it to 0.071 m.
+    let tmp = tempfile::tempdir().unwrap();
+    let runs = with_and_without_the_observer(
+        tmp.path(),
+        "models/sindy_m100.json",
+        "plants/m100_like.json",
+        "circle",
+        "30",
+    );
+    let late = runs.map(|r| r["overall_second_half"]["rmse"].as_f64().unwrap());
     eprintln!(
         "shipped SINDy, circle on m100_like, second-half RMSE: observer {:.4} m, none {:.4} m",
         late[0], late[1]
@@ -383,36 +405,14 @@ fn the_observer_does_not_destabilise_a_model_that_lacks_its_plants_delay() {
     let model = tmp.path().join("base.json");
     let o = identify("sindy", &log, &model, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let off = tmp.path().join("off.json");
-    fs::write(&off, r#"{"disturbance_gain": 0}"#).unwrap();
-    let work = tmp.path().join("work");
-    let mut late = Vec::new();
-    for mpc in [None, Some(&off)] {
-        let out = tmp.path().join(if mpc.is_some() { "off" } else { "default" });
-        let mut args = vec![
-            "track",
-            "--model",
-            model.to_str().unwrap(),
-            "--plant",
-            "plants/effects/latency.json",
-            "--trajectory",
-            "sinusoid",
-            "--duration",
-            "15",
-            "--max-rmse",
-            "inf",
-            "--out",
-            out.to_str().unwrap(),
-            "--work-dir",
-            work.to_str().unwrap(),
-        ];
-        if let Some(p) = mpc {
-            args.extend(["--mpc", p.to_str().unwrap()]);
-        }
-        let o = uavgen(&args);
-        assert!(o.status.success(), "{}", stderr(&o));
-        late.push(report(&out)["overall_second_half"]["rmse"].as_f64().unwrap());
-    }
+    let runs = with_and_without_the_observer(
+        tmp.path(),
+        model.to_str().unwrap(),
+        "plants/effects/latency.json",
+        "sinusoid",
+        "15",
+    );
+    let late = runs.map(|r| r["overall_second_half"]["rmse"].as_f64().unwrap());
     eprintln!(
         "nominal model on the latency plant, sinusoid, second half: observer {:.4} m, none {:.4} m",
         late[0], late[1]
