@@ -170,6 +170,13 @@ fn absurd_mpc_options_and_plants_are_refused() {
         (r#"{"u_min": [-1e308, -1, -1, -1]}"#, "u_min[0]", "-1e308"),
         (r#"{"u_max": [1, 1, 1, 1e308]}"#, "u_max[3]", "1e308"),
         (r#"{"regularisation": 1e300}"#, "regularisation", "1e300"),
+        (r#"{"disturbance_gain": 1.5}"#, "disturbance_gain", "1.5"),
+        (r#"{"disturbance_gain": -0.1}"#, "disturbance_gain", "-0.1"),
+        (
+            r#"{"disturbance_max_acceleration": 1e9}"#,
+            "disturbance_max_acceleration",
+            "1e9",
+        ),
     ] {
         let mpc = tmp.path().join("mpc.json");
         std::fs::write(&mpc, text).unwrap();
