@@ -245,7 +245,7 @@ fn channels_with_different_delays_are_timed_exactly() {
 /// Offset-free tracking: the plant is the model plus a constant 0.6 m/s² push in x and −0.4 m/s² in
 /// y (a wind the model does not know). Without the observer the loop tracks the circle with the
 /// bias the push leaves; with the crate's default observer (`DISTURBANCE_GAIN`,
-/// `DISTURBANCE_BOUND`) the MPC predicts with the estimated push: 0.150 → 0.061 m (measured).
+/// `DISTURBANCE_BOUND`) the MPC predicts with the estimated push: 0.150 → 0.060 m (measured).
 #[test]
 fn the_disturbance_observer_removes_a_constant_push() {
     let push = [0.6, -0.4, 0.0];
