@@ -38,6 +38,25 @@ use crate::Real;
 /// The longest run of samples without a fresh measurement over which an error is still spread.
 pub const MAX_GAP: u32 = 4;
 
+/// The update of the module docs at a fresh measurement `x`, `gap` samples after the last, whose
+/// prediction is `predicted`: eᵢ ← clamp(eᵢ + L (xᵢ − x̂ᵢ)/m, ±bᵢ) on the rows with bᵢ > 0 (a
+/// non-finite step leaves its row alone); nothing for a gap of 0 or above [`MAX_GAP`]. The one
+/// definition [`DisturbanceObserver`] and uavgen's generic reference backend (states of run-time
+/// number) both use; the slices are zipped, so the shortest sets the rows updated.
+pub fn correct<R: Real>(gain: R, bound: &[R], estimate: &mut [R], x: &[R], predicted: &[R], gap: u32) {
+    if gap == 0 || gap > MAX_GAP {
+        return;
+    }
+    let m = R::from_u32(gap);
+    let rows = estimate.iter_mut().zip(bound);
+    for ((e, &b), (xi, pi)) in rows.zip(x.iter().zip(predicted)) {
+        let step = gain * (*xi - *pi) / m;
+        if b > R::ZERO && step.is_finite() {
+            *e = (*e + step).clamp_to(-b, b);
+        }
+    }
+}
+
 /// The observer of the module docs for `NX` states.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DisturbanceObserver<R, const NX: usize> {
@@ -103,15 +122,8 @@ impl<R: Real, const NX: usize> DisturbanceObserver<R, NX> {
         if !x.iter().all(|v| v.is_finite()) || (self.measured && *x == self.last) {
             return;
         }
-        if self.measured && self.gap >= 1 && self.gap <= MAX_GAP {
-            let m = R::from_u32(self.gap);
-            let rows = self.estimate.iter_mut().zip(&self.bound);
-            for ((e, &b), (xi, pi)) in rows.zip(x.iter().zip(&self.predicted)) {
-                let step = self.gain * (*xi - *pi) / m;
-                if b > R::ZERO && step.is_finite() {
-                    *e = (*e + step).clamp_to(-b, b);
-                }
-            }
+        if self.measured {
+            correct(self.gain, &self.bound, &mut self.estimate, x, &self.predicted, self.gap);
         }
         self.last = *x;
         self.predicted = *x;

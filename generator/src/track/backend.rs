@@ -6,7 +6,7 @@ use crate::{Model, ModelIr, MpcOptions};
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 use std::time::Instant;
-use uavgen_runtime::Trajectory;
+use uavgen_runtime::{disturbance, Trajectory};
 
 /// One closed-loop sample's answer from the MPC.
 #[derive(Clone, Debug, PartialEq)]
@@ -192,7 +192,7 @@ fn model_step(mpc: &GenericMpc, x: &[f64], u: &[f64]) -> Vec<f64> {
 }
 
 /// uavgen-runtime's `DisturbanceObserver` (runtime/src/disturbance.rs) over a state of run-time
-/// length: e ← clamp(e + L (x − x̂)/m, ±b) at each fresh measurement, x̂ ← F(x̂, u) + e per sample.
+/// length: its update `disturbance::correct` at each fresh measurement, x̂ ← F(x̂, u) + e per sample.
 struct Observer {
     gain: f64,
     bound: Vec<f64>,
@@ -207,18 +207,19 @@ impl Observer {
         self.gain > 0.0 && self.bound.iter().any(|b| *b > 0.0)
     }
 
+    /// Forget the estimate and the last measurement (the runtime's `DisturbanceObserver::reset`).
+    fn reset(&mut self) {
+        self.estimate.iter_mut().for_each(|e| *e = 0.0);
+        self.last = None;
+        self.gap = 0;
+    }
+
     fn measure(&mut self, x: &[f64]) {
         if !self.active() || !x.iter().all(|v| v.is_finite()) || self.last.as_deref() == Some(x) {
             return;
         }
-        if self.last.is_some() && (1..=uavgen_runtime::disturbance::MAX_GAP).contains(&self.gap) {
-            let m = self.gap as f64;
-            for i in 0..x.len() {
-                let step = self.gain * (x[i] - self.predicted[i]) / m;
-                if self.bound[i] > 0.0 && step.is_finite() {
-                    self.estimate[i] = (self.estimate[i] + step).clamp(-self.bound[i], self.bound[i]);
-                }
-            }
+        if self.last.is_some() {
+            disturbance::correct(self.gain, &self.bound, &mut self.estimate, x, &self.predicted, self.gap);
         }
         self.last = Some(x.to_vec());
         self.predicted = x.to_vec();
@@ -226,7 +227,7 @@ impl Observer {
     }
 
     fn advance(&mut self, next: impl Fn(&[f64]) -> Vec<f64>) {
-        if self.last.is_none() || self.gap > uavgen_runtime::disturbance::MAX_GAP {
+        if self.last.is_none() || self.gap > disturbance::MAX_GAP {
             return;
         }
         let mut x = next(&self.predicted);
@@ -330,11 +331,8 @@ impl Backend for GenericBackend {
         // The inputs sent over the largest delay and one more (the prediction reaches back over the
         // delay; the observer needs the input that acted over the sample before).
         self.history = vec![u.to_vec(); self.delays.iter().copied().max().unwrap_or(0) + 1];
-        let nx = self.nx;
-        self.observer.estimate = vec![0.0; nx];
-        self.observer.last = None;
-        self.observer.gap = 0;
-        self.mpc.set_disturbance(&vec![0.0; nx]);
+        self.observer.reset();
+        self.mpc.set_disturbance(&self.observer.estimate);
         Ok(())
     }
 
