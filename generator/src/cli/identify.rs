@@ -7,6 +7,7 @@ use uavgen::identify::bounded_selection::select_bounded_with;
 use uavgen::identify::dataset::{build, DatasetOptions, Targets};
 use uavgen::identify::horizon_check::{self, HorizonCheck};
 use uavgen::identify::horizon_delay::{self, HeldOut, RefineOptions};
+use uavgen::identify::loop_refine;
 use uavgen::identify::pd::{self, PdFitOptions};
 use uavgen::identify::preprocess::{LowPass, SavGol};
 use uavgen::identify::response::{self, InputResponse, ScanOptions, ScanSegment};
@@ -43,6 +44,14 @@ pub enum OptimizerArg {
 pub enum CriterionArg {
     Aic,
     Bic,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum RefineLoopsArg {
+    /// Refine each loop's row by its held-out free runs; kept where they improve by 5 %.
+    Auto,
+    /// Keep the sparse regression's coefficients.
+    None,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -131,6 +140,14 @@ pub struct IdentifyArgs {
     /// `derivative`: Savitzky-Golay derivatives at the samples (docs/sindy.md, "Targets").
     #[arg(long, value_enum)]
     targets: Option<TargetsArg>,
+    /// SINDy: refine the rows the commands drive (vz, roll_rate, pitch_rate, yaw_rate) by
+    /// simulation error: their selected terms' coefficients are fitted to free runs of one MPC
+    /// horizon on the logs (roll and pitch judged by the angle), cross-validated over the logs
+    /// and kept where the held-out free runs improve by 5 % (`auto`, the default; integral
+    /// targets only); `none` keeps the sparse regression's coefficients
+    /// (docs/identification.md, "Loop refinement").
+    #[arg(long, value_enum, default_value_t = RefineLoopsArg::Auto)]
+    refine_loops: RefineLoopsArg,
     /// PD: mass in kg.
     #[arg(long, default_value_t = 2.4)]
     mass: f64,
@@ -398,8 +415,20 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             provenance["input_response"]["refined_over_the_horizon"] = refinement_json(r, &RefineOptions::default());
         }
     }
+    // With the loop refinement kept, the sparse fit's own text is the fallback should the refined
+    // model fail the horizon check.
+    let mut unrefined = None;
     let json = match args.method {
-        Method::Sindy => fit_sindy(&args, &dataset, logs.len(), &name, provenance, response)?,
+        Method::Sindy => {
+            let fitted = fit_sindy(&args, &dataset, logs.len(), &name, provenance, response)?;
+            match refine_loops(&args, &fitted, &dataset)? {
+                Some(refined) => {
+                    unrefined = Some(fitted + "\n");
+                    refined
+                }
+                None => fitted,
+            }
+        }
         Method::Pd => {
             let options = pd_options(&args)?;
             eprintln!(
@@ -415,34 +444,37 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())?
         }
     } + "\n";
-    let json = attach(&json, &args, response)?;
-    // The operating envelope of the training logs (docs/model-format.md#envelope).
     let refs: Vec<&uavgen::logs::FlightLog> = logs.iter().collect();
-    let json = match envelope::from_logs(&refs) {
-        Some(e) => {
-            eprintln!(
-                "operating envelope (observed range of the logs, widened): {}",
-                e.bounds
-                    .iter()
-                    .map(|(s, lo, hi)| format!("{s} [{lo}, {hi}]"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-            envelope::attach(&json, &args.out.display().to_string(), &e).map_err(|e| e.to_string())?
-        }
-        None => json,
-    };
-    // Exactly what `--model` will read, validated before anything is written.
-    let model = uavgen::model::parse(&json, &args.out.display().to_string())
-        .map_err(|e| format!("the identified model is invalid: {e}"))?;
+    let envelope = envelope::from_logs(&refs);
+    if let Some(e) = &envelope {
+        eprintln!(
+            "operating envelope (observed range of the logs, widened): {}",
+            e.bounds
+                .iter()
+                .map(|(s, lo, hi)| format!("{s} [{lo}, {hi}]"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let (mut json, mut model) = finish(&json, &args, response, envelope.as_ref())?;
     if let Some(c) = model.corrections.as_ref() {
         for line in c.summary(&model.inputs) {
             eprintln!("  corrections: {}", line.trim());
         }
     }
-    let report = super::progress::with_spinner("horizon check", || {
+    let mut report = super::progress::with_spinner("horizon check", || {
         horizon_check::check(&model, &HorizonCheck::default())
     });
+    if let (Some(r), Some(text)) = (&report, &unrefined) {
+        if !r.passed() {
+            eprintln!(
+                "loop refinement: the refined model leaves the bounds within one MPC horizon ({} of {} trials); keeping the sparse fit's coefficients",
+                r.unbounded, r.trials
+            );
+            (json, model) = finish(text, &args, response, envelope.as_ref())?;
+            report = horizon_check::check(&model, &HorizonCheck::default());
+        }
+    }
     if let Some(report) = report {
         eprintln!("{}", report.summary());
         if !report.passed() && !args.no_horizon_check {
@@ -458,6 +490,87 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     super::write_atomically(&args.out, &json)?;
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// The model text as it will be written (corrections and envelope attached) and what `--model`
+/// will read from it, validated.
+fn finish(
+    json: &str,
+    args: &IdentifyArgs,
+    response: Option<InputResponse>,
+    envelope: Option<&envelope::DeclaredEnvelope>,
+) -> Result<(String, uavgen::model::Model), String> {
+    let json = attach(json, args, response)?;
+    let json = match envelope {
+        Some(e) => envelope::attach(&json, &args.out.display().to_string(), e).map_err(|e| e.to_string())?,
+        None => json,
+    };
+    let model = uavgen::model::parse(&json, &args.out.display().to_string())
+        .map_err(|e| format!("the identified model is invalid: {e}"))?;
+    Ok((json, model))
+}
+
+/// `--refine-loops auto`: the simulation-error refinement of the loops' rows
+/// (`uavgen::identify::loop_refine`), reported and recorded in the provenance. `Some(text)` when a
+/// row was refined.
+fn refine_loops(
+    args: &IdentifyArgs,
+    fitted: &str,
+    dataset: &uavgen::identify::dataset::Dataset,
+) -> Result<Option<String>, String> {
+    if args.refine_loops == RefineLoopsArg::None {
+        return Ok(None);
+    }
+    if !dataset.is_interval_form() {
+        eprintln!("loop refinement: skipped (it needs the integral targets, --targets integral)");
+        return Ok(None);
+    }
+    let mut file: uavgen::model::SindyFile = serde_json::from_str(fitted).map_err(|e| e.to_string())?;
+    let options = loop_refine::RefineOptions::default();
+    eprintln!(
+        "refining the loops by simulation error (--refine-loops auto: free runs of {} samples every {} samples, held out by log; kept at a {:.0} % held-out gain) ...",
+        options.horizon,
+        options.stride,
+        100.0 * options.min_gain
+    );
+    let report = super::progress::with_spinner("refining the loops", || {
+        loop_refine::refine(&mut file.coefficients, dataset, &options)
+    });
+    for r in &report {
+        eprintln!("  {}", r.line());
+    }
+    if !report.iter().any(|r| r.kept) {
+        return Ok(None);
+    }
+    let loops: serde_json::Map<String, serde_json::Value> = report
+        .iter()
+        .map(|r| {
+            (
+                r.row.to_string(),
+                serde_json::json!({
+                    "judged_by": r.output,
+                    "held_out_free_run_rmse": [r.held_out_rmse.0, r.held_out_rmse.1],
+                    "kept": r.kept,
+                    "sparse_fit": r.terms.iter().map(|(t, a, _)| (t.clone(), serde_json::json!(a))).collect::<serde_json::Map<_, _>>(),
+                    "note": r.note,
+                }),
+            )
+        })
+        .collect();
+    if let serde_json::Value::Object(p) = &mut file.provenance {
+        p.insert(
+            "loop_refinement".into(),
+            serde_json::json!({
+                "horizon": options.horizon,
+                "stride": options.stride,
+                "min_gain": options.min_gain,
+                "loops": loops,
+            }),
+        );
+    }
+    Ok(Some(
+        serde_json::to_string_pretty(&file).map_err(|e| e.to_string())? + "\n",
+    ))
 }
 
 /// Is every state and input of `log` constant (within 1e-12)?

@@ -127,6 +127,55 @@ pub(crate) fn refine_delays(p: &Problem, state: &State, channels: &[Bracket]) ->
     values
 }
 
+/// The named loops' gains refined over the horizon, as the delays are: the one-step least squares
+/// of [`super::loop_fit`] fits the loop's row to noisy rate differences, which attenuates it (a
+/// loop fitted to the aircraft's slow attitude response comes out stiffer than its free runs
+/// follow), while the MPC predicts with the loop over N samples. Each named loop's gain g (the
+/// coupling kept) moves to the argmin of R over g₀ · 2^(i/4), i = −4 … 4, then ± 2^(1/16) around the
+/// best, one loop at a time (roll, pitch, yaw), the others at their current values. Training free
+/// runs only; the held-out data score the result.
+pub(crate) fn refine_loop_gains(p: &Problem, state: &mut State) {
+    let fin = p.final_fit();
+    let train = p.fits[fin].train.clone();
+    let errors = |s: &State| {
+        let mut e = HorizonErrors::default();
+        add_errors(p, s, fin, &train, STRIDE, &mut e);
+        e
+    };
+    if state.transform.loops.iter().all(Option::is_none) {
+        return;
+    }
+    let reference = errors(state);
+    if reference.n == 0 {
+        return;
+    }
+    for l in 0..state.transform.loops.len() {
+        let Some(start) = state.transform.loops[l] else {
+            continue;
+        };
+        let mut tried: Vec<(f64, f64)> = Vec::new();
+        let try_gain = |g: f64, state: &State, tried: &mut Vec<(f64, f64)>| {
+            if !(g.is_finite() && g > 0.0) || tried.iter().any(|t| (t.0 / g - 1.0).abs() < 1e-9) {
+                return;
+            }
+            let mut s = state.clone();
+            s.transform.loops[l] = Some(super::catalogue::loops::LoopParams { gain: g, ..start });
+            tried.push((g, objective(&reference, &errors(&s))));
+        };
+        for i in -4..=4 {
+            try_gain(start.gain * 2f64.powf(i as f64 / 4.0), state, &mut tried);
+        }
+        let coarse = best(&tried);
+        for o in [-1.0, 1.0] {
+            try_gain(coarse.0 * 2f64.powf(o / 16.0), state, &mut tried);
+        }
+        let (g, r) = best(&tried);
+        if r.is_finite() {
+            state.transform.loops[l] = Some(super::catalogue::loops::LoopParams { gain: g, ..start });
+        }
+    }
+}
+
 /// The (value, objective) with the smallest objective; the first on ties.
 fn best(tried: &[(f64, f64)]) -> (f64, f64) {
     tried

@@ -288,4 +288,5 @@ pub(crate) fn refit(p: &Problem, state: &mut State) {
             }
         }
     }
+    super::horizon_fit::refine_loop_gains(p, state);
 }
