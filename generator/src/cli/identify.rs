@@ -388,32 +388,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         },
     });
     if let Some((est, refined)) = &estimate {
-        let channels: serde_json::Map<String, serde_json::Value> = est
-            .channels
-            .iter()
-            .map(|c| {
-                (
-                    c.input.to_string(),
-                    serde_json::json!({
-                        "delay": round_s(c.delay),
-                        "delay_range": [round_s(c.delay_range.0), round_s(c.delay_range.1)],
-                        "lag": c.lag.map(round_s),
-                        "lag_range": c.lag_range.map(|(a, b)| [round_s(a), round_s(b)]),
-                        "held_out_one_step_rmse": [c.one_step_rmse.0, c.one_step_rmse.1],
-                        "held_out_horizon_rmse": [c.horizon_rmse.0, c.horizon_rmse.1, c.horizon_rmse.2],
-                        "evidence": c.evidence,
-                        "note": c.note,
-                    }),
-                )
-            })
-            .collect();
-        provenance["input_response"] = serde_json::json!({
-            "held_out": format!("{} {}", est.folds, est.fold_kind),
-            "channels": channels,
-        });
-        if let Some(r) = refined {
-            provenance["input_response"]["refined_over_the_horizon"] = refinement_json(r, &RefineOptions::default());
-        }
+        provenance["input_response"] = input_response_json(est, refined.as_ref());
     }
     // With the loop refinement kept, the sparse fit's own text is the fallback should the refined
     // model fail the horizon check.
@@ -422,9 +397,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         Method::Sindy => {
             let fitted = fit_sindy(&args, &dataset, logs.len(), &name, provenance, response)?;
             match refine_loops(&args, &fitted, &dataset)? {
-                Some(refined) => {
-                    unrefined = Some(fitted + "\n");
-                    refined
+                Some(texts) => {
+                    unrefined = texts.fallback;
+                    texts.chosen
                 }
                 None => fitted,
             }
@@ -456,7 +431,59 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
                 .join(", ")
         );
     }
-    let (mut json, mut model) = finish(&json, &args, response, envelope.as_ref())?;
+    let json = checked(&json, unrefined.as_deref(), &args, response, envelope.as_ref())?;
+    super::write_atomically(&args.out, &json)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// `provenance.input_response`: what `--input-delay auto` found per channel, and the refinement
+/// over the horizon.
+fn input_response_json(
+    est: &response::ResponseEstimate,
+    refined: Option<&horizon_delay::Refinement>,
+) -> serde_json::Value {
+    let channels: serde_json::Map<String, serde_json::Value> = est
+        .channels
+        .iter()
+        .map(|c| {
+            (
+                c.input.to_string(),
+                serde_json::json!({
+                    "delay": round_s(c.delay),
+                    "delay_range": [round_s(c.delay_range.0), round_s(c.delay_range.1)],
+                    "lag": c.lag.map(round_s),
+                    "lag_range": c.lag_range.map(|(a, b)| [round_s(a), round_s(b)]),
+                    "held_out_one_step_rmse": [c.one_step_rmse.0, c.one_step_rmse.1],
+                    "held_out_horizon_rmse": [c.horizon_rmse.0, c.horizon_rmse.1, c.horizon_rmse.2],
+                    "evidence": c.evidence,
+                    "note": c.note,
+                }),
+            )
+        })
+        .collect();
+    let mut v = serde_json::json!({
+        "held_out": format!("{} {}", est.folds, est.fold_kind),
+        "channels": channels,
+    });
+    if let Some(r) = refined {
+        v["refined_over_the_horizon"] = refinement_json(r, &RefineOptions::default());
+    }
+    v
+}
+
+/// The text to write: `json` as [`finish`] makes it, its corrections printed, and the horizon check
+/// (one MPC horizon of free run from random envelope states must stay bounded). When the model
+/// fails it and `unrefined` (the sparse fit before the loop refinement) is given, that one is
+/// checked instead; a model that still fails is an error unless --no-horizon-check.
+fn checked(
+    json: &str,
+    unrefined: Option<&str>,
+    args: &IdentifyArgs,
+    response: Option<InputResponse>,
+    envelope: Option<&envelope::DeclaredEnvelope>,
+) -> Result<String, String> {
+    let (mut json, mut model) = finish(json, args, response, envelope)?;
     if let Some(c) = model.corrections.as_ref() {
         for line in c.summary(&model.inputs) {
             eprintln!("  corrections: {}", line.trim());
@@ -465,13 +492,13 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     let mut report = super::progress::with_spinner("horizon check", || {
         horizon_check::check(&model, &HorizonCheck::default())
     });
-    if let (Some(r), Some(text)) = (&report, &unrefined) {
+    if let (Some(r), Some(text)) = (&report, unrefined) {
         if !r.passed() {
             eprintln!(
                 "loop refinement: the refined model leaves the bounds within one MPC horizon ({} of {} trials); keeping the sparse fit's coefficients",
                 r.unbounded, r.trials
             );
-            (json, model) = finish(text, &args, response, envelope.as_ref())?;
+            (json, model) = finish(text, args, response, envelope)?;
             report = horizon_check::check(&model, &HorizonCheck::default());
         }
     }
@@ -487,9 +514,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             ));
         }
     }
-    super::write_atomically(&args.out, &json)?;
-    println!("wrote {}", args.out.display());
-    Ok(())
+    Ok(json)
 }
 
 /// The model text as it will be written (corrections and envelope attached) and what `--model`
@@ -510,14 +535,21 @@ fn finish(
     Ok((json, model))
 }
 
+/// What [`refine_loops`] gives: the text to write (the refinement recorded in its provenance) and,
+/// when a loop was refined, the sparse fit's text to fall back on (its provenance saying so).
+struct RefinedTexts {
+    chosen: String,
+    fallback: Option<String>,
+}
+
 /// `--refine-loops auto`: the simulation-error refinement of the loops' rows
-/// (`uavgen::identify::loop_refine`), reported and recorded in the provenance. `Some(text)` when a
-/// row was refined.
+/// (`uavgen::identify::loop_refine`), printed and recorded in the provenance
+/// (`provenance.loop_refinement`). `None` when it does not run (`none`, or derivative targets).
 fn refine_loops(
     args: &IdentifyArgs,
     fitted: &str,
     dataset: &uavgen::identify::dataset::Dataset,
-) -> Result<Option<String>, String> {
+) -> Result<Option<RefinedTexts>, String> {
     if args.refine_loops == RefineLoopsArg::None {
         return Ok(None);
     }
@@ -525,7 +557,8 @@ fn refine_loops(
         eprintln!("loop refinement: skipped (it needs the integral targets, --targets integral)");
         return Ok(None);
     }
-    let mut file: uavgen::model::SindyFile = serde_json::from_str(fitted).map_err(|e| e.to_string())?;
+    let sparse: uavgen::model::SindyFile = serde_json::from_str(fitted).map_err(|e| e.to_string())?;
+    let mut file = sparse.clone();
     let options = loop_refine::RefineOptions::default();
     eprintln!(
         "refining the loops by simulation error (--refine-loops auto: free runs of {} samples every {} samples, held out by log; kept at a {:.0} % held-out gain) ...",
@@ -538,9 +571,6 @@ fn refine_loops(
     });
     for r in &report {
         eprintln!("  {}", r.line());
-    }
-    if !report.iter().any(|r| r.kept) {
-        return Ok(None);
     }
     let loops: serde_json::Map<String, serde_json::Value> = report
         .iter()
@@ -557,20 +587,29 @@ fn refine_loops(
             )
         })
         .collect();
-    if let serde_json::Value::Object(p) = &mut file.provenance {
-        p.insert(
-            "loop_refinement".into(),
-            serde_json::json!({
-                "horizon": options.horizon,
-                "stride": options.stride,
-                "min_gain": options.min_gain,
-                "loops": loops,
-            }),
-        );
-    }
-    Ok(Some(
-        serde_json::to_string_pretty(&file).map_err(|e| e.to_string())? + "\n",
-    ))
+    let record = serde_json::json!({
+        "horizon": options.horizon,
+        "stride": options.stride,
+        "min_gain": options.min_gain,
+        "loops": loops,
+    });
+    let text = |mut f: uavgen::model::SindyFile, record: serde_json::Value| -> Result<String, String> {
+        if let serde_json::Value::Object(p) = &mut f.provenance {
+            p.insert("loop_refinement".into(), record);
+        }
+        serde_json::to_string_pretty(&f).map_err(|e| e.to_string())
+    };
+    let fallback = if report.iter().any(|r| r.kept) {
+        let mut reverted = record.clone();
+        reverted["reverted"] = "the refined model failed the horizon check: the sparse fit's coefficients".into();
+        Some(text(sparse, reverted)? + "\n")
+    } else {
+        None
+    };
+    Ok(Some(RefinedTexts {
+        chosen: text(file, record)?,
+        fallback,
+    }))
 }
 
 /// Is every state and input of `log` constant (within 1e-12)?

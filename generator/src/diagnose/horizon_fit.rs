@@ -1,4 +1,5 @@
-//! The input delays refined over the MPC horizon, between the two estimates `diagnose` has.
+//! The input delays (and, [`refine_loop_gains`], the named loops' gains) refined over the MPC
+//! horizon; the delays between the two estimates `diagnose` has.
 //!
 //! The delay scan of `latency` ([`super::input_fit`]) minimises the one-step residual: it finds the
 //! delay at which the model's next-sample predictions fit best. The residual analysis (the "where"
@@ -26,6 +27,7 @@
 //! unchanged (their free runs want no longer delay); the held-out horizon RMSE improves
 //! (docs/diagnosis.md).
 
+use super::catalogue::loops::LoopParams;
 use super::horizon_rule::add_errors;
 use super::problem::{HorizonErrors, Problem, State};
 
@@ -127,13 +129,14 @@ pub(crate) fn refine_delays(p: &Problem, state: &State, channels: &[Bracket]) ->
     values
 }
 
-/// The named loops' gains refined over the horizon, as the delays are: the one-step least squares
-/// of [`super::loop_fit`] fits the loop's row to noisy rate differences, which attenuates it (a
-/// loop fitted to the aircraft's slow attitude response comes out stiffer than its free runs
-/// follow), while the MPC predicts with the loop over N samples. Each named loop's gain g (the
-/// coupling kept) moves to the argmin of R over g₀ · 2^(i/4), i = −4 … 4, then ± 2^(1/16) around the
-/// best, one loop at a time (roll, pitch, yaw), the others at their current values. Training free
-/// runs only; the held-out data score the result.
+/// The named loops' gains and couplings refined over the horizon, as the delays are: the one-step
+/// least squares of [`super::loop_fit`] fits the loop's row to noisy rate differences, which
+/// attenuates it and reads a delayed loop as a slower one, while the MPC predicts with the loop
+/// over N samples. Each named loop moves by coordinate search on R (module docs): its gain over
+/// g · 2^(±i/4), i = 1 … 4; then its coupling over c ± i/8, i = 1 … 4; then its gain over
+/// g · 2^(±1/16), g · 2^(±1/8) — a step is taken only when R falls; one loop at a time (roll,
+/// pitch, yaw), the others at their current values. Training free runs only; the held-out data
+/// score the result.
 pub(crate) fn refine_loop_gains(p: &Problem, state: &mut State) {
     let fin = p.final_fit();
     let train = p.fits[fin].train.clone();
@@ -153,25 +156,44 @@ pub(crate) fn refine_loop_gains(p: &Problem, state: &mut State) {
         let Some(start) = state.transform.loops[l] else {
             continue;
         };
-        let mut tried: Vec<(f64, f64)> = Vec::new();
-        let try_gain = |g: f64, state: &State, tried: &mut Vec<(f64, f64)>| {
-            if !(g.is_finite() && g > 0.0) || tried.iter().any(|t| (t.0 / g - 1.0).abs() < 1e-9) {
-                return;
-            }
+        // R with loop l at p, the other loops at their current values.
+        let score = |p: LoopParams, state: &State| {
             let mut s = state.clone();
-            s.transform.loops[l] = Some(super::catalogue::loops::LoopParams { gain: g, ..start });
-            tried.push((g, objective(&reference, &errors(&s))));
+            s.transform.loops[l] = Some(p);
+            objective(&reference, &errors(&s))
         };
-        for i in -4..=4 {
-            try_gain(start.gain * 2f64.powf(i as f64 / 4.0), state, &mut tried);
+        let mut current = (start, score(start, state));
+        // The gain (multiplicative steps), the coupling (additive), then the gain once more, finer.
+        let passes: [(bool, &[f64]); 3] = [
+            (true, &[-1.0, -0.75, -0.5, -0.25, 0.25, 0.5, 0.75, 1.0]),
+            (false, &[-0.5, -0.375, -0.25, -0.125, 0.125, 0.25, 0.375, 0.5]),
+            (true, &[-0.125, -0.0625, 0.0625, 0.125]),
+        ];
+        for (gain, steps) in passes {
+            let from = current.0;
+            for &d in steps {
+                let p = if gain {
+                    LoopParams {
+                        gain: from.gain * 2f64.powf(d),
+                        ..from
+                    }
+                } else {
+                    LoopParams {
+                        coupling: from.coupling + d,
+                        ..from
+                    }
+                };
+                if !(p.gain.is_finite() && p.gain > 0.0 && p.coupling.is_finite()) {
+                    continue;
+                }
+                let r = score(p, state);
+                if r < current.1 {
+                    current = (p, r);
+                }
+            }
         }
-        let coarse = best(&tried);
-        for o in [-1.0, 1.0] {
-            try_gain(coarse.0 * 2f64.powf(o / 16.0), state, &mut tried);
-        }
-        let (g, r) = best(&tried);
-        if r.is_finite() {
-            state.transform.loops[l] = Some(super::catalogue::loops::LoopParams { gain: g, ..start });
+        if current.1.is_finite() {
+            state.transform.loops[l] = Some(current.0);
         }
     }
 }

@@ -11,6 +11,10 @@
 //! out: a row without couplings keeps coupling = 1). Standard errors from (ΦᵀΦ)⁻¹ s² τ (τ the
 //! integrated autocorrelation time of the row's residual); a loop is part of the effect when its
 //! z = max |θ|/σ is above the rule's threshold and its gain is positive.
+//!
+//! [`refit`] then refines each named loop's gain over the training free runs of one MPC horizon
+//! ([`super::horizon_fit::refine_loop_gains`]): the one-step fit attenuates a loop, and reads a
+//! delayed loop as a slower one.
 
 use super::catalogue::loops::{channel, LoopParams, NLOOPS};
 use super::catalogue::EffectKind;

@@ -161,6 +161,7 @@ fn install(p: &Problem, state: &mut State, c: &Candidate) {
         }
         Install::Loop(loops) => {
             state.transform.loops = *loops;
+            super::horizon_fit::refine_loop_gains(p, state);
             refit(p, state);
         }
         Install::Stale => {
