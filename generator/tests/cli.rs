@@ -9,7 +9,7 @@ use std::process::Command;
 
 mod common;
 
-use common::{repo, stderr, uavgen};
+use common::{identify, repo, stderr, uavgen};
 
 fn files_of(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     let mut out = Vec::new();
@@ -846,18 +846,13 @@ fn identify_sindy_defaults_on_the_m100_logs() {
     assert!(refined < 0.85 * plain, "refined {refined}, sparse fit {plain}");
 }
 
-/// `--refine-loops`: by default SINDy's four command loops are refined by simulation error, each
-/// loop's result printed and recorded in the provenance; a refinement is kept only with its
-/// held-out gain, and a loop not kept keeps the sparse fit's coefficients; `none` leaves the sparse
-/// fit as it is.
-#[test]
-fn identify_refines_the_command_loops_unless_told_not_to() {
-    let tmp = tempfile::tempdir().unwrap();
-    let log = tmp.path().join("flight.csv");
+/// A 60 s excitation flight of `plants/<plant>.json` (`uavgen simulate`) in `dir`.
+fn excitation_log(dir: &Path, plant: &str) -> PathBuf {
+    let log = dir.join("flight.csv");
     let o = uavgen(&[
         "simulate",
         "--plant",
-        repo().join("plants/m100_like.json").to_str().unwrap(),
+        repo().join(format!("plants/{plant}.json")).to_str().unwrap(),
         "--profile",
         "excite",
         "--duration",
@@ -866,19 +861,18 @@ fn identify_refines_the_command_loops_unless_told_not_to() {
         log.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let run = |extra: &[&str], out: &Path| {
-        let mut args = vec![
-            "identify",
-            "--method",
-            "sindy",
-            "--log",
-            log.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        uavgen(&args)
-    };
+    log
+}
+
+/// `--refine-loops`: by default SINDy's four command loops are refined by simulation error, each
+/// loop's result printed and recorded in the provenance; a refinement is kept only with its
+/// held-out gain, and a loop not kept keeps the sparse fit's coefficients; `none` leaves the sparse
+/// fit as it is.
+#[test]
+fn identify_refines_the_command_loops_unless_told_not_to() {
+    let tmp = tempfile::tempdir().unwrap();
+    let log = excitation_log(tmp.path(), "m100_like");
+    let run = |extra: &[&str], out: &Path| identify("sindy", &log, out, extra);
     let read = |p: &Path| -> serde_json::Value { serde_json::from_str(&fs::read_to_string(p).unwrap()).unwrap() };
     let row = |v: &serde_json::Value, state: &str| -> Vec<(String, f64)> {
         v["coefficients"]
@@ -940,19 +934,7 @@ fn identify_refines_the_command_loops_unless_told_not_to() {
 #[test]
 fn identify_alpha_is_the_ridge_ladder_unless_given() {
     let tmp = tempfile::tempdir().unwrap();
-    let log = tmp.path().join("flight.csv");
-    let o = uavgen(&[
-        "simulate",
-        "--plant",
-        repo().join("plants/nominal.json").to_str().unwrap(),
-        "--profile",
-        "excite",
-        "--duration",
-        "60",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let log = excitation_log(tmp.path(), "nominal");
     let run = |extra: &[&str], out: &Path| {
         let mut args = vec![
             "identify",

@@ -468,6 +468,16 @@ mod tests {
         Dataset { segments }
     }
 
+    /// Every coefficient within `tol` (relative) of `want`'s.
+    fn assert_near(coefficients: &[Coefficient], want: &[Coefficient], tol: f64) {
+        for (c, w) in coefficients.iter().zip(want) {
+            assert!(
+                (c.coefficient - w.coefficient).abs() < tol * w.coefficient.abs(),
+                "{c:?} vs {w:?}"
+            );
+        }
+    }
+
     fn roll_row(wn: f64, zeta: f64, gain: f64) -> Vec<Coefficient> {
         let c = |term: &str, coefficient: f64| Coefficient {
             state: "roll_rate".into(),
@@ -490,12 +500,7 @@ mod tests {
         assert!(roll.kept, "{}", roll.line());
         assert!(roll.held_out_rmse.1 < 0.1 * roll.held_out_rmse.0, "{}", roll.line());
         let want = roll_row(8.0, 0.7, 1.0);
-        for (c, w) in coefficients.iter().zip(&want) {
-            assert!(
-                (c.coefficient - w.coefficient).abs() < 0.02 * w.coefficient.abs(),
-                "{c:?} vs {w:?}"
-            );
-        }
+        assert_near(&coefficients, &want, 0.02);
         // The rows without terms are reported, not refined.
         assert!(report.iter().filter(|r| r.row != "roll_rate").all(|r| !r.kept));
     }
@@ -509,12 +514,7 @@ mod tests {
         let report = refine(&mut coefficients, &data, &RefineOptions::default());
         let roll = report.iter().find(|r| r.row == "roll_rate").unwrap();
         assert!(roll.held_out_rmse.0 < 0.002, "{}", roll.line());
-        for (c, w) in coefficients.iter().zip(&roll_row(8.0, 0.7, 1.0)) {
-            assert!(
-                (c.coefficient - w.coefficient).abs() < 0.01 * w.coefficient.abs(),
-                "{c:?} vs {w:?}"
-            );
-        }
+        assert_near(&coefficients, &roll_row(8.0, 0.7, 1.0), 0.01);
     }
 
     #[test]
@@ -525,11 +525,6 @@ mod tests {
         let roll = report.iter().find(|r| r.row == "roll_rate").unwrap();
         assert!(roll.kept, "{}", roll.line());
         let want = roll_row(6.0, 0.5, 0.9);
-        for (c, w) in coefficients.iter().zip(&want) {
-            assert!(
-                (c.coefficient - w.coefficient).abs() < 0.02 * w.coefficient.abs(),
-                "{c:?} vs {w:?}"
-            );
-        }
+        assert_near(&coefficients, &want, 0.02);
     }
 }
