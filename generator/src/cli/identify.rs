@@ -561,9 +561,10 @@ fn refine_loops(
     let mut file = sparse.clone();
     let options = loop_refine::RefineOptions::default();
     eprintln!(
-        "refining the loops by simulation error (--refine-loops auto: free runs of {} samples every {} samples, held out by log; kept at a {:.0} % held-out gain) ...",
+        "refining the loops by simulation error (--refine-loops auto: free runs of {} samples every {} samples, at most {} runs, held out by log; kept at a {:.0} % held-out gain) ...",
         options.horizon,
         options.stride,
+        options.max_windows,
         100.0 * options.min_gain
     );
     let report = super::progress::with_spinner("refining the loops", || {
@@ -590,6 +591,7 @@ fn refine_loops(
     let record = serde_json::json!({
         "horizon": options.horizon,
         "stride": options.stride,
+        "max_windows": options.max_windows,
         "min_gain": options.min_gain,
         "loops": loops,
     });

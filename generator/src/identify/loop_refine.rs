@@ -71,8 +71,12 @@ pub const LOOPS: [Loop; 4] = [
 pub struct RefineOptions {
     /// Samples of one free run (the MPC horizon).
     pub horizon: usize,
-    /// Samples between window starts.
+    /// Samples between window starts (at least; see `max_windows`).
     pub stride: usize,
+    /// Windows at most: on long logs the stride grows so that there are no more (free runs of
+    /// one horizon that start 3 samples apart are nearly the same run; a 20-minute log would
+    /// otherwise cost minutes).
+    pub max_windows: usize,
     /// Levenberg–Marquardt iterations at most.
     pub max_iter: usize,
     /// Relative fall of the held-out sum of squares a refinement must bring to be kept.
@@ -82,11 +86,13 @@ pub struct RefineOptions {
 }
 
 impl Default for RefineOptions {
-    /// One 30-sample horizon every 3rd sample, 40 iterations, kept at a 5 % held-out gain, 5 blocks.
+    /// One 30-sample horizon every 3rd sample (at most 2000 windows), 40 iterations, kept at a 5 %
+    /// held-out gain, 5 blocks.
     fn default() -> Self {
         Self {
             horizon: 30,
             stride: 3,
+            max_windows: 2000,
             max_iter: 40,
             min_gain: 0.05,
             blocks: 5,
@@ -294,7 +300,13 @@ pub fn refine(coefficients: &mut [Coefficient], data: &Dataset, options: &Refine
         .map(|s| s.to_string())
         .collect();
     let h = options.horizon.max(1);
-    let stride = options.stride.max(1);
+    let starts: usize = data
+        .segments
+        .iter()
+        .filter(|seg| seg.x_next.len() == seg.x.len() && seg.x.len() >= h)
+        .map(|seg| seg.x.len() - h + 1)
+        .sum();
+    let stride = options.stride.max(1).max(starts.div_ceil(options.max_windows.max(1)));
     let mut windows = Vec::new();
     for (si, seg) in data.segments.iter().enumerate() {
         if seg.x_next.len() != seg.x.len() || seg.x.len() < h {
