@@ -529,6 +529,22 @@ mod tests {
         assert_near(&coefficients, &roll_row(8.0, 0.7, 1.0), 0.01);
     }
 
+    /// On long data the stride grows so that no more than `max_windows` free runs are scored.
+    #[test]
+    fn the_windows_are_capped() {
+        let data = roll_data(6.0, 0.5, 0.9, 0.0, 3);
+        let options = RefineOptions {
+            max_windows: 100,
+            ..RefineOptions::default()
+        };
+        let mut coefficients = roll_row(3.0, 0.3, 0.6);
+        let report = refine(&mut coefficients, &data, &options);
+        let roll = report.iter().find(|r| r.row == "roll_rate").unwrap();
+        assert!(roll.windows <= 100 && roll.windows >= 90, "{}", roll.line());
+        let all = refine(&mut roll_row(3.0, 0.3, 0.6), &data, &RefineOptions::default());
+        assert_eq!(all[1].windows, 3 * 271_usize.div_ceil(3), "{}", all[1].line());
+    }
+
     #[test]
     fn one_log_is_cross_validated_in_blocks() {
         let data = roll_data(6.0, 0.5, 0.9, 0.0, 1);
