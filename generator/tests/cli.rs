@@ -9,7 +9,7 @@ use std::process::Command;
 
 mod common;
 
-use common::{identify, repo, stderr, uavgen};
+use common::{excite, identify, repo, stderr, uavgen};
 
 fn files_of(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     let mut out = Vec::new();
@@ -630,21 +630,7 @@ fn identify_with_input_delay_writes_the_latency_and_refuses_bad_specs() {
 fn identify_defaults_estimate_the_delays_and_write_a_bounded_model() {
     let tmp = tempfile::tempdir().unwrap();
     let log = tmp.path().join("excite.csv");
-    let plant = repo().join("plants/m100_like.json");
-    let o = uavgen(&[
-        "simulate",
-        "--plant",
-        plant.to_str().unwrap(),
-        "--profile",
-        "excite",
-        "--duration",
-        "180",
-        "--seed",
-        "11",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    excite("plants/m100_like.json", "180", Some("11"), &log);
     let out = tmp.path().join("sindy.json");
     let o = uavgen(&[
         "identify",
@@ -849,18 +835,7 @@ fn identify_sindy_defaults_on_the_m100_logs() {
 /// A 60 s excitation flight of `plants/<plant>.json` (`uavgen simulate`) in `dir`.
 fn excitation_log(dir: &Path, plant: &str) -> PathBuf {
     let log = dir.join("flight.csv");
-    let o = uavgen(&[
-        "simulate",
-        "--plant",
-        repo().join(format!("plants/{plant}.json")).to_str().unwrap(),
-        "--profile",
-        "excite",
-        "--duration",
-        "60",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    excite(&format!("plants/{plant}.json"), "60", None, &log);
     log
 }
 

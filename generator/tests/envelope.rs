@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{repo, stderr, uavgen};
+use common::{excite, repo, stderr, uavgen};
 use std::fs;
 use std::path::Path;
 
@@ -188,18 +188,7 @@ fn the_generated_crate_carries_the_declared_envelope() {
 fn evaluate_notes_a_log_that_leaves_the_envelope() {
     let tmp = tempfile::tempdir().unwrap();
     let log = tmp.path().join("flight.csv");
-    let o = uavgen(&[
-        "simulate",
-        "--plant",
-        "plants/nominal.json",
-        "--profile",
-        "excite",
-        "--duration",
-        "20",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    excite("plants/nominal.json", "20", None, &log);
     let mut model: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(repo().join("models/pd_hover.json")).unwrap()).unwrap();
     let evaluate = |model: &serde_json::Value| {

@@ -5,7 +5,7 @@ use std::fs;
 
 mod common;
 
-use common::{identify, stderr, uavgen};
+use common::{excite, identify, stderr, uavgen};
 
 fn report(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
@@ -242,20 +242,7 @@ fn models_identified_on_m100_like_track_every_trajectory_within_the_bounds() {
     // the paper's weights (examples/mpc_paper.json) the SINDy model oscillates on the circle.
     let tmp = tempfile::tempdir().unwrap();
     let log = tmp.path().join("excite.csv");
-    let o = uavgen(&[
-        "simulate",
-        "--plant",
-        "plants/m100_like.json",
-        "--profile",
-        "excite",
-        "--duration",
-        "180",
-        "--seed",
-        "11",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    excite("plants/m100_like.json", "180", Some("11"), &log);
     let work = tmp.path().join("work");
     let shipped = |name: &str| format!("models/{name}.json");
     for (method, extra) in [
@@ -388,20 +375,7 @@ fn the_observer_does_not_destabilise_a_model_that_lacks_its_plants_delay() {
     // 0.022 m measured). docs/validation.md "Offset-free tracking".
     let tmp = tempfile::tempdir().unwrap();
     let log = tmp.path().join("nominal.csv");
-    let o = uavgen(&[
-        "simulate",
-        "--plant",
-        "plants/nominal.json",
-        "--profile",
-        "excite",
-        "--duration",
-        "180",
-        "--seed",
-        "1",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    excite("plants/nominal.json", "180", Some("1"), &log);
     let model = tmp.path().join("base.json");
     let o = identify("sindy", &log, &model, &[]);
     assert!(o.status.success(), "{}", stderr(&o));

@@ -24,6 +24,28 @@ pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// `uavgen simulate --plant PLANT --profile excite --duration SECONDS [--seed SEED] --out OUT`
+/// (PLANT relative to the repository), which must succeed.
+pub fn excite(plant: &str, seconds: &str, seed: Option<&str>, out: &std::path::Path) {
+    let plant = repo().join(plant);
+    let mut args = vec![
+        "simulate",
+        "--plant",
+        plant.to_str().unwrap(),
+        "--profile",
+        "excite",
+        "--duration",
+        seconds,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    if let Some(seed) = seed {
+        args.extend(["--seed", seed]);
+    }
+    let o = uavgen(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
 /// `uavgen identify --method METHOD --log LOG --out OUT EXTRA…`.
 pub fn identify(method: &str, log: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> Output {
     let mut args = vec![
