@@ -9,7 +9,8 @@ pub struct SimulateArgs {
     /// Plant file (uavgen-plant/1 JSON, docs/plant-format.md).
     #[arg(long)]
     plant: PathBuf,
-    /// Profile, or a comma list (one segment each): excite, hover, circle, sinusoid, spiral.
+    /// Profile, or a comma list (one segment each): excite, excite-hold-heading, hover, circle,
+    /// sinusoid, spiral.
     #[arg(long, default_value = "excite")]
     profile: String,
     /// Seconds per segment, a comma list as long as --profile.

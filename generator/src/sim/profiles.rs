@@ -6,6 +6,9 @@
 //!   one in four a low pass at z 0.1–0.4 m for ground effect; a new one every 4–8 s). The tilt
 //!   √(roll² + pitch²) of the command is limited to 0.35 rad, the horizontal velocity reference
 //!   to 2.5 m/s. Starts at (0, 0, 3), random heading.
+//! - `excite-hold-heading`: `excite` with the heading held at its random start (no yaw-rate
+//!   excitation, no new heading per waypoint; only the weak heading loop commands u_yaw_rate): the
+//!   flights of an aircraft whose pilot never turns, whose heading and yaw channel carry no signal.
 //! - `hover`: hold (3, 3, 5) with small random disturbances on all inputs.
 //! - `circle`, `sinusoid`, `spiral`: the paper's trajectories (MODEL_NOTES.md), tracked by the
 //!   position loop with velocity and acceleration feed-forward, heading 0, from (3, 3, 5).
@@ -21,6 +24,7 @@ use std::str::FromStr;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Profile {
     Excite,
+    ExciteHoldHeading,
     Hover,
     Circle,
     Sinusoid,
@@ -28,8 +32,9 @@ pub enum Profile {
 }
 
 impl Profile {
-    pub const ALL: [Profile; 5] = [
+    pub const ALL: [Profile; 6] = [
         Profile::Excite,
+        Profile::ExciteHoldHeading,
         Profile::Hover,
         Profile::Circle,
         Profile::Sinusoid,
@@ -39,6 +44,7 @@ impl Profile {
     pub fn name(self) -> &'static str {
         match self {
             Profile::Excite => "excite",
+            Profile::ExciteHoldHeading => "excite-hold-heading",
             Profile::Hover => "hover",
             Profile::Circle => "circle",
             Profile::Sinusoid => "sinusoid",
@@ -57,7 +63,7 @@ impl Profile {
     pub fn start(self, rng: &mut Random) -> [f64; 12] {
         let mut x = [0.0; 12];
         match self {
-            Profile::Excite => {
+            Profile::Excite | Profile::ExciteHoldHeading => {
                 x[2] = 3.0;
                 x[5] = rng.range(-std::f64::consts::PI, std::f64::consts::PI);
             }
@@ -109,7 +115,7 @@ impl Profile {
                     ],
                 )
             }
-            Profile::Excite | Profile::Hover => return None,
+            Profile::Excite | Profile::ExciteHoldHeading | Profile::Hover => return None,
         };
         Some(Reference {
             p,
@@ -242,6 +248,7 @@ impl Pilot {
         let start = profile.start(&mut rng);
         let excitation = match profile {
             Profile::Excite => Some(Excitation::new(&mut rng, [0.4, 0.06, 0.06, 0.2], [0.7, 0.1, 0.1, 0.4])),
+            Profile::ExciteHoldHeading => Some(Excitation::new(&mut rng, [0.4, 0.06, 0.06, 0.0], [0.7, 0.1, 0.1, 0.0])),
             Profile::Hover => Some(Excitation::new(&mut rng, [0.05, 0.01, 0.01, 0.05], [0.0; 4])),
             _ => None,
         };
@@ -264,7 +271,7 @@ impl Pilot {
     /// The command at time t (from the segment start) for the measured state x.
     pub fn command(&mut self, t: f64, x: &[f64; 12]) -> [f64; 4] {
         match self.profile {
-            Profile::Excite => self.excite(t, x),
+            Profile::Excite | Profile::ExciteHoldHeading => self.excite(t, x),
             Profile::Hover => {
                 let r = Reference {
                     p: [self.start[0], self.start[1], self.start[2]],
@@ -293,7 +300,10 @@ impl Pilot {
                     self.rng.range(1.5, 10.0)
                 },
             ];
-            self.heading = self.rng.range(-std::f64::consts::PI, std::f64::consts::PI);
+            let heading = self.rng.range(-std::f64::consts::PI, std::f64::consts::PI);
+            if self.profile == Profile::Excite {
+                self.heading = heading;
+            }
             self.next_waypoint = t + self.rng.range(4.0, 8.0);
         }
         let e = match &mut self.excitation {
