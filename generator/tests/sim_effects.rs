@@ -856,3 +856,24 @@ fn noise_free_copy_keeps_the_flight_and_its_held_rows() {
         }
     }
 }
+
+/// `excite-hold-heading` keeps the heading where it started and leaves the yaw channel silent, while
+/// the other channels are excited as by `excite` (the unexcited-direction case of identification).
+#[test]
+fn excite_hold_heading_keeps_the_heading() {
+    let plant = PlantFile::load(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../plants/nano.json")))
+        .expect("plants/nano.json");
+    let opts = SimulateOptions::new(vec![Profile::ExciteHoldHeading, Profile::Excite], vec![30.0, 30.0], 3);
+    let log = simulate(&plant, &opts).expect("simulate");
+    let rows = |k: usize| log.rows.iter().filter(move |r| r.segment == k);
+    let range = |k: usize, col: usize| {
+        let v: Vec<f64> = rows(k).map(|r| r.x[col]).collect();
+        v.iter().cloned().fold(f64::NEG_INFINITY, f64::max) - v.iter().cloned().fold(f64::INFINITY, f64::min)
+    };
+    let u_range = |k: usize, j: usize| rows(k).map(|r| r.u[j].abs()).fold(0.0, f64::max);
+    assert!(range(0, 5) < 0.1, "held heading moved {} rad", range(0, 5));
+    assert!(u_range(0, 3) < 0.02, "u_yaw_rate up to {}", u_range(0, 3));
+    // The other channels carry their excitation in both; `excite` turns.
+    assert!(u_range(0, 1) > 0.1 && u_range(0, 0) > 0.5);
+    assert!(range(1, 5) > 1.0, "excite turned only {} rad", range(1, 5));
+}
