@@ -14,6 +14,7 @@ pub mod evaluate;
 pub mod fuzzing;
 pub mod identify;
 pub mod import;
+pub mod interrupt;
 pub mod ir;
 pub mod logs;
 pub mod metrics;

@@ -234,6 +234,10 @@ fn default_sigpipe() {}
 
 fn main() -> ExitCode {
     default_sigpipe();
+    // Ctrl-C, SIGTERM and SIGHUP wait for an output being put in place and leave nothing partial
+    // (uavgen::interrupt, docs/cli.md "Files"). Without a handler (it cannot be installed) the
+    // next run still removes what an interrupted one left.
+    let _ = ctrlc::set_handler(|| uavgen::interrupt::on_signal());
     let cli = Cli::parse();
     cli::progress::set_quiet(cli.quiet);
     let result = match cli.command {

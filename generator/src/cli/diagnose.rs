@@ -118,6 +118,8 @@ fn self_check(args: &DiagnoseArgs) -> Result<(), String> {
     bar.finish_and_clear();
     let md = check.markdown();
     println!("{md}");
+    // One critical section: an interrupting signal waits for it (uavgen::interrupt).
+    let guard = uavgen::interrupt::output_lock();
     let tmp = args.out.with_extension("uavgen-tmp");
     let _ = std::fs::remove_dir_all(&tmp);
     std::fs::create_dir_all(&tmp).map_err(|e| format!("{}: {e}", tmp.display()))?;
@@ -128,6 +130,7 @@ fn self_check(args: &DiagnoseArgs) -> Result<(), String> {
         std::fs::remove_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
     }
     std::fs::rename(&tmp, &args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    drop(guard);
     if let Some(doc) = &args.write_doc {
         let text = std::fs::read_to_string(doc).map_err(|e| format!("{}: {e}", doc.display()))?;
         let (begin, end) = ("<!-- self-check:begin -->", "<!-- self-check:end -->");

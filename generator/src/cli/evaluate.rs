@@ -86,6 +86,9 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
     println!("{evaluation}");
     // The plots first, the JSON last: a failed plot leaves no JSON behind.
     if let Some(dir) = &args.plots {
+        // The directory and its plots in one critical section: an interrupting signal waits for
+        // them (uavgen::interrupt), so no empty or half-filled plot directory is left.
+        let _guard = uavgen::interrupt::output_lock();
         std::fs::create_dir_all(dir).map_err(|e| format!("--plots {}: {e}", dir.display()))?;
         for log in &logs {
             let files = super::progress::with_spinner("plotting", || plot_states(&model, log, &options, dir));

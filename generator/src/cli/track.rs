@@ -97,7 +97,7 @@ pub struct TrackArgs {
 }
 
 fn write(path: &Path, text: &str) -> Result<(), String> {
-    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
+    super::write_atomically(path, text)
 }
 
 /// Runs `uavgen track`; Ok carries the exit status of the verdicts (0, 3 or 4).

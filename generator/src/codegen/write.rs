@@ -102,6 +102,23 @@ pub fn write_all(dir: &Path, files: &[(PathBuf, String)]) -> Result<(), WriteErr
 
 /// [`write_all`]; with `force`, files a user added to a generated crate are deleted too.
 pub fn write_all_with(dir: &Path, files: &[(PathBuf, String)], force: bool) -> Result<(), WriteError> {
+    // A symlinked output directory is followed: the crate is written where the link points (the
+    // link stays a link), and staged beside that directory.
+    let resolved;
+    let dir = if dir.is_symlink() {
+        resolved = fs::canonicalize(dir).map_err(|e| WriteError::Io {
+            path: dir.to_owned(),
+            source: io::Error::new(
+                e.kind(),
+                format!("a symbolic link whose target cannot be resolved: {e}"),
+            ),
+        })?;
+        resolved.as_path()
+    } else {
+        dir
+    };
+    // One critical section: an interrupting signal waits for it (crate::interrupt).
+    let _guard = crate::interrupt::output_lock();
     check_target(dir)?;
     if !force {
         let foreign = foreign_files(dir, files)?;
@@ -121,6 +138,7 @@ pub fn write_all_with(dir: &Path, files: &[(PathBuf, String)], force: bool) -> R
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".into());
+    recover_killed_runs(dir, &parent, &base);
     let staging = parent.join(format!(".{base}.uavgen-staging-{}", std::process::id()));
     let old = parent.join(format!(".{base}.uavgen-old-{}", std::process::id()));
     // Errors name the target the user gave, not the internal staging directory.
@@ -139,6 +157,26 @@ pub fn write_all_with(dir: &Path, files: &[(PathBuf, String)], force: bool) -> R
         let _ = fs::remove_dir_all(&old);
     }
     result
+}
+
+/// What a killed run (no signal handler ran) left beside `dir`: its staging directory is removed;
+/// a crate it had set aside is put back if `dir` is missing (the kill fell between the two renames
+/// of the swap), else removed.
+fn recover_killed_runs(dir: &Path, parent: &Path, base: &str) {
+    let old_prefix = format!(".{base}.uavgen-old-");
+    if let Ok(entries) = fs::read_dir(parent) {
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if crate::interrupt::stale_pid(&name, &old_prefix, "").is_some() {
+                if !dir.exists() {
+                    let _ = fs::rename(entry.path(), dir);
+                } else {
+                    let _ = fs::remove_dir_all(entry.path());
+                }
+            }
+        }
+    }
+    crate::interrupt::remove_stale(parent, &format!(".{base}.uavgen-staging-"), "");
 }
 
 fn stage_and_swap(dir: &Path, staging: &Path, old: &Path, files: &[(PathBuf, String)]) -> Result<(), WriteError> {

@@ -35,6 +35,8 @@ impl Diagnosis {
     /// Write the diagnosis into `dir` (created). An existing `dir` is an error unless `force`,
     /// when it is replaced once everything is written. Returns the files written.
     pub fn write(&self, dir: &Path, force: bool) -> Result<Vec<PathBuf>, DiagnoseError> {
+        // One critical section: an interrupting signal waits for it (crate::interrupt).
+        let _guard = crate::interrupt::output_lock();
         if dir.exists() && !force {
             return Err(io(dir, "exists; pass --force to replace it"));
         }

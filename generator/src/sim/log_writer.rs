@@ -65,6 +65,14 @@ pub fn write_atomically(path: &Path, text: &str) -> Result<(), PlantError> {
     tmp_name.push(name);
     tmp_name.push(format!(".{}.uavgen-tmp", std::process::id()));
     let tmp = path.with_file_name(tmp_name);
+    // One critical section: an interrupting signal waits for it (crate::interrupt).
+    let _guard = crate::interrupt::output_lock();
+    // What a killed run left beside this output: its temporary carries its dead pid.
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    crate::interrupt::remove_stale(dir, &format!(".{}.", name.to_string_lossy()), ".uavgen-tmp");
     let fail = |e: std::io::Error| PlantError::new(&label, "", PlantErrorKind::Write, format!("cannot write: {e}"));
     if let Err(e) = std::fs::write(&tmp, text) {
         let _ = std::fs::remove_file(&tmp);
