@@ -13,8 +13,9 @@ pub struct EnvelopeArgs {
     /// Flight log the model was identified on (CSV, or a recording imported with --profile); repeat for several.
     #[arg(long = "log", required = true)]
     logs: Vec<PathBuf>,
-    /// How to read --log files that are not CSV: a preset (px4, mavros, dji-osdk-ros, ardupilot)
-    /// or a profile file (docs/import.md).
+    /// How to read --log files that are not contract CSVs (PX4 ULog, …): a preset (px4, mavros,
+    /// dji-osdk-ros, ardupilot) or a profile file; a profile with a `time` column maps a CSV of
+    /// another schema (`uavgen import --print-profile csv`; docs/import.md).
     #[arg(long)]
     profile: Option<String>,
     /// Write the model file with this envelope (replacing an `envelope` block it has) here; without

@@ -7,12 +7,15 @@ use uavgen::import::{import_file, GridOptions, ImportOptions, Profile, PRESETS};
 
 #[derive(Args)]
 pub struct ImportArgs {
-    /// The recording: PX4 ULog (.ulg), MCAP (.mcap: ROS 2 bags, Foxglove), ROS 1 bag (.bag) or
-    /// ArduPilot DataFlash (.bin); the format is taken from the first bytes (docs/import.md).
+    /// The recording: PX4 ULog (.ulg), MCAP (.mcap: ROS 2 bags, Foxglove), ROS 1 bag (.bag),
+    /// ArduPilot DataFlash (.bin), or a CSV of another schema (with a profile that maps its
+    /// columns); the format is taken from the first bytes (docs/import.md). Several files become
+    /// consecutive segments of one log.
     #[arg(required_unless_present = "print_profile")]
-    file: Option<PathBuf>,
-    /// Topic and field mapping: a preset (px4, mavros, dji-osdk-ros, ardupilot) or a profile file
-    /// (uavgen-import-profile/1 JSON; `--print-profile px4` prints one to start from).
+    files: Vec<PathBuf>,
+    /// Topic and field mapping: a preset (px4, mavros, dji-osdk-ros, ardupilot), the CSV template
+    /// (csv), or a profile file (uavgen-import-profile/1 JSON; `--print-profile px4` or
+    /// `--print-profile csv` prints one to start from).
     #[arg(long, required_unless_present = "print_profile")]
     profile: Option<String>,
     /// Output flight log (docs/log-format.md CSV).
@@ -29,7 +32,7 @@ pub struct ImportArgs {
     /// Overwrite --out if it exists.
     #[arg(long)]
     force: bool,
-    /// Print a preset profile as JSON and exit.
+    /// Print a preset profile as JSON and exit (`csv`: the template for a CSV of another schema).
     #[arg(long, value_name = "PRESET")]
     print_profile: Option<String>,
 }
@@ -46,7 +49,7 @@ pub fn run(args: ImportArgs) -> Result<(), String> {
         print!("{}", profile.to_json());
         return Ok(());
     }
-    let (Some(file), Some(profile), Some(out)) = (&args.file, &args.profile, &args.out) else {
+    let (false, Some(profile), Some(out)) = (args.files.is_empty(), &args.profile, &args.out) else {
         return Err("FILE, --profile and --out are required".into());
     };
     if let Some(hz) = args.rate {
@@ -62,10 +65,20 @@ pub fn run(args: ImportArgs) -> Result<(), String> {
         grid: GridOptions { rate_hz: args.rate },
         partial: args.partial,
     };
-    let imported = super::progress::with_spinner(&format!("importing {}", file.display()), || {
-        import_file(file, &profile, &options)
-    })
-    .map_err(|e| e.to_string())?;
+    let mut imported: Option<uavgen::import::Imported> = None;
+    for file in &args.files {
+        let next = super::progress::with_spinner(&format!("importing {}", file.display()), || {
+            import_file(file, &profile, &options)
+        })
+        .map_err(|e| e.to_string())?;
+        match &mut imported {
+            Some(log) => log.append(next),
+            None => imported = Some(next),
+        }
+    }
+    let Some(imported) = imported else {
+        return Err("FILE is required".into());
+    };
     let csv = imported.to_csv();
     // Check the result reads back as a valid log before writing anything.
     uavgen::logs::parse_log(&csv, &out.display().to_string())

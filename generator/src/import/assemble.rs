@@ -21,7 +21,7 @@
 
 use super::error::{ImportError, ImportErrorKind};
 use super::frames::{self, Body, Inertial};
-use super::profile::{Profile, RatesKind, VectorFrame};
+use super::profile::{Angle, Profile, RatesKind, VectorFrame};
 use super::recording::Recording;
 use crate::logs::{median, unwrap_angle, GAP_PERIODS};
 
@@ -114,12 +114,18 @@ fn err(file: &str, kind: ImportErrorKind, m: String) -> ImportError {
     ImportError::new(file, kind, m)
 }
 
-fn vector(rec: &Recording, topic: &str, fields: &[String; 3], what: &str) -> Result<Channel<3>, ImportError> {
+fn vector(
+    rec: &Recording,
+    topic: &str,
+    fields: &[String; 3],
+    scale: f64,
+    what: &str,
+) -> Result<Channel<3>, ImportError> {
     let names: Vec<&str> = fields.iter().map(String::as_str).collect();
     let (t, cols) = rec.series(topic, &names)?;
     let mut v = Vec::with_capacity(t.len());
     for i in 0..t.len() {
-        v.push([cols[0][i], cols[1][i], cols[2][i]]);
+        v.push([scale * cols[0][i], scale * cols[1][i], scale * cols[2][i]]);
     }
     Ok(Channel {
         what: format!("{what} (`{topic}`)"),
@@ -137,6 +143,8 @@ struct AttitudeSpec<'a> {
     inertial: Inertial,
     body: Body,
     scale: f64,
+    /// Euler angles negated first (a nose-up pitch in ENU/FLU).
+    negate: &'a [Angle],
 }
 
 /// Attitude samples as ENU/FLU Euler angles with the yaw unwrapped.
@@ -148,6 +156,7 @@ fn attitude_channel(rec: &Recording, spec: &AttitudeSpec, what: &str) -> Result<
         inertial,
         body,
         scale,
+        negate,
     } = *spec;
     let names: Vec<&str> = match (quaternion, euler) {
         (Some(q), _) => q.iter().map(String::as_str).collect(),
@@ -174,7 +183,10 @@ fn attitude_channel(rec: &Recording, spec: &AttitudeSpec, what: &str) -> Result<
                 )
             })?
         } else {
-            let e = [cols[0][i] * scale, cols[1][i] * scale, cols[2][i] * scale];
+            let mut e = [cols[0][i] * scale, cols[1][i] * scale, cols[2][i] * scale];
+            for a in negate {
+                e[a.index()] = -e[a.index()];
+            }
             if e.iter().any(|x| x.is_nan()) {
                 continue;
             }
@@ -198,8 +210,9 @@ fn attitude_channel(rec: &Recording, spec: &AttitudeSpec, what: &str) -> Result<
 /// Convert a recording into rows of the log contract.
 pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result<(Vec<Row>, Summary), ImportError> {
     let file = rec.file.as_str();
-    let position = vector(rec, &profile.position.topic, &profile.position.fields, "position")?;
-    let velocity = vector(rec, &profile.velocity.topic, &profile.velocity.fields, "velocity")?;
+    let (p, v) = (&profile.position, &profile.velocity);
+    let position = vector(rec, &p.topic, &p.fields, p.scale, "position")?;
+    let velocity = vector(rec, &v.topic, &v.fields, v.scale, "velocity")?;
     let a = &profile.attitude;
     let spec = AttitudeSpec {
         topic: &a.topic,
@@ -208,11 +221,15 @@ pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result
         inertial: a.inertial,
         body: a.body,
         scale: a.scale,
+        negate: &a.negate,
     };
     let attitude = attitude_channel(rec, &spec, "attitude")?;
-    let mut rates = vector(rec, &profile.rates.topic, &profile.rates.fields, "rates")?;
-    for r in rates.v.iter_mut() {
-        *r = r.map(|x| x * profile.rates.scale);
+    let r = &profile.rates;
+    let mut rates = vector(rec, &r.topic, &r.fields, r.scale, "rates")?;
+    for v in rates.v.iter_mut() {
+        for a in &r.negate {
+            v[a.index()] = -v[a.index()];
+        }
     }
     let mut summary = Summary::default();
     let mut inputs: Vec<Channel<1>> = Vec::new();
@@ -223,6 +240,15 @@ pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result
                 what: format!("{name} (`{}` `{field}`)", input.topic),
                 t: t.to_vec(),
                 v: cols[0].iter().map(|x| [input.scale * x + input.offset]).collect(),
+            }
+        } else if let Some(terms) = &input.terms {
+            let names: Vec<&str> = terms.iter().map(|t| t.field.as_str()).collect();
+            let (t, cols) = rec.series(&input.topic, &names)?;
+            let sum = |i: usize| terms.iter().zip(&cols).map(|(term, c)| term.scale * c[i]).sum::<f64>();
+            Channel {
+                what: format!("{name} (`{}` {})", input.topic, names.join(" + ")),
+                t: t.to_vec(),
+                v: (0..t.len()).map(|i| [input.scale * sum(i) + input.offset]).collect(),
             }
         } else {
             let (Some(angle), Some(inertial), Some(body)) = (input.angle, input.inertial, input.body) else {
@@ -235,6 +261,7 @@ pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result
                 inertial,
                 body,
                 scale: input.scale,
+                negate: &input.negate,
             };
             let e = attitude_channel(rec, &spec, name)?;
             let mut v: Vec<[f64; 1]> = e.v.iter().map(|x| [x[angle.index()]]).collect();

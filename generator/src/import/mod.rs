@@ -16,6 +16,7 @@ pub mod mcap;
 pub mod profile;
 pub mod recording;
 pub mod rosmsg;
+pub mod table;
 pub mod ulog;
 
 pub use assemble::{GridOptions, Row, Summary, GROUPS};
@@ -124,6 +125,7 @@ pub fn import_bytes(
     let format = match (Format::sniff(bytes), claimed) {
         (Some(f), _) => f,
         (None, Some(Format::Csv)) => Format::Csv,
+        (None, None) if profile.time.is_some() => Format::Csv,
         (None, Some(f)) => {
             return Err(ImportError::new(
                 label,
@@ -159,13 +161,17 @@ pub fn import_bytes(
         Format::Mcap => mcap::read(label, bytes, &needs, profile.clock)?,
         Format::Bag => bag::read(label, bytes, &needs, profile.clock)?,
         Format::DataFlash => dataflash::read(label, bytes, &needs)?,
-        Format::Csv => {
+        Format::Csv if profile.time.is_none() => {
             return Err(ImportError::new(
                 label,
                 ImportErrorKind::WrongFormat,
-                "this is a CSV flight log already (docs/log-format.md): use it directly",
+                format!(
+                    "a CSV: profile `{}` maps recordings of a flight stack, not CSV columns. A CSV of the contract (docs/log-format.md) is used directly; a CSV of another schema needs a profile with a `time` column and the `csv` topic: `uavgen import --print-profile csv > my.json`, edit its column names, units and frames, then `--profile my.json` (docs/import.md)",
+                    profile.name
+                ),
             ))
         }
+        Format::Csv => table::read(label, bytes, profile)?,
     };
     let assembled = assemble::assemble(&rec, profile, options.grid);
     if let Some(b) = rec.broken.as_ref().filter(|_| !options.partial) {
@@ -226,7 +232,50 @@ pub fn header(battery: bool) -> String {
     h
 }
 
+/// The pause put between the files of [`Imported::append`], s (as the simulator's segments).
+pub const FILE_GAP_S: f64 = 2.0;
+
 impl Imported {
+    /// Append `next` (another file of the same flight campaign) as further segments: its segment
+    /// numbers follow this log's, and its times are shifted, if needed, to start [`FILE_GAP_S`]
+    /// after this log's end (each file's own clock usually starts at 0). The shift is noted.
+    pub fn append(&mut self, mut next: Imported) {
+        let segments = self.rows.last().map_or(0, |r| r.segment + 1);
+        let end = self.rows.last().map_or(f64::NEG_INFINITY, |r| r.t);
+        let start = next.rows.first().map_or(0.0, |r| r.t);
+        let shift = if start < end + FILE_GAP_S {
+            end + FILE_GAP_S - start
+        } else {
+            0.0
+        };
+        for r in &mut next.rows {
+            r.t += shift;
+            r.segment += segments;
+        }
+        let s = &mut self.summary;
+        let n = &next.summary;
+        s.rows += n.rows;
+        s.segments += n.segments;
+        for g in 0..4 {
+            s.held[g] += n.held[g];
+            s.nan_setpoints[g] += n.nan_setpoints[g];
+        }
+        s.stale_rows += n.stale_rows;
+        s.dropped_segments += n.dropped_segments;
+        s.gaps.extend(n.gaps.iter().map(|(a, b)| (a + shift, b + shift)));
+        self.notes.push(format!(
+            "{}: segments {segments}…{} (times shifted by {shift} s to follow the previous file)",
+            next.source,
+            segments + n.segments.max(1) - 1
+        ));
+        self.notes.extend(next.notes);
+        if self.broken.is_none() {
+            self.broken = next.broken.map(|b| format!("{}: {b}", next.source));
+        }
+        self.source = format!("{}, {}", self.source, next.source);
+        self.rows.extend(next.rows);
+    }
+
     /// The log as CSV of the contract: metadata comments, the header, rows. Numbers are written
     /// in Rust's shortest round-trip form (reading them back gives the same f64).
     pub fn to_csv(&self) -> String {

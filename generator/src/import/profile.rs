@@ -13,12 +13,18 @@ use std::path::Path;
 pub const PROFILE_FORMAT: &str = "uavgen-import-profile/1";
 
 /// The built-in presets: name and JSON text.
-pub const PRESETS: [(&str, &str); 4] = [
+pub const PRESETS: [(&str, &str); 5] = [
     ("px4", include_str!("presets/px4.json")),
     ("mavros", include_str!("presets/mavros.json")),
     ("dji-osdk-ros", include_str!("presets/dji-osdk-ros.json")),
     ("ardupilot", include_str!("presets/ardupilot.json")),
+    // The template for a delimited log of another schema (a motion-capture CSV): edit its column
+    // names, units and frames (docs/import.md, "CSV of another schema").
+    ("csv", include_str!("presets/csv.json")),
 ];
+
+/// The one topic of a CSV recording: its columns are the topic's fields.
+pub const CSV_TOPIC: &str = "csv";
 
 /// A mapping from a recording to the 12 states and 4 inputs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -46,6 +52,40 @@ pub struct Profile {
     /// Optional battery voltage in V.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub battery_voltage: Option<Scalar>,
+    /// CSV recordings only (and required there): the time column and its unit. A profile with
+    /// `time` maps a delimited log of another schema; one without reads CSVs as the contract.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time: Option<TimeColumn>,
+}
+
+/// The time column of a CSV recording.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeColumn {
+    pub field: String,
+    pub unit: TimeUnit,
+}
+
+/// Units of a time column.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TimeUnit {
+    S,
+    Ms,
+    Us,
+    Ns,
+}
+
+impl TimeUnit {
+    /// Seconds per unit.
+    pub fn seconds(self) -> f64 {
+        match self {
+            TimeUnit::S => 1.0,
+            TimeUnit::Ms => 1e-3,
+            TimeUnit::Us => 1e-6,
+            TimeUnit::Ns => 1e-9,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -75,6 +115,9 @@ pub struct Vector {
     pub topic: String,
     pub fields: [String; 3],
     pub frame: VectorFrame,
+    /// Multiply by this first (1 for m and m/s; 0.001 for mm and mm/s).
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub scale: f64,
 }
 
 /// The attitude: a quaternion `[w, x, y, z]` (body → inertial) or ZYX Euler angles
@@ -93,6 +136,10 @@ pub struct Attitude {
     /// 0.0017453292519943296 for ArduPilot's centidegrees).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub scale: f64,
+    /// Euler angles logged with the opposite sign of the `inertial`/`body` convention (e.g.
+    /// `["pitch"]` for a nose-up pitch in ENU/FLU, where pitch is positive nose down): negated first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub negate: Vec<Angle>,
 }
 
 /// How the rates are logged.
@@ -117,6 +164,9 @@ pub struct Rates {
     /// Multiply by this first (1 for rad/s; 0.017453292519943295 for deg/s).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub scale: f64,
+    /// Euler-angle rates logged with the opposite sign (with a nose-up pitch: `["pitch"]`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub negate: Vec<Angle>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -178,6 +228,10 @@ pub struct Input {
     /// A scalar field (value = scale · field + offset) ...
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub field: Option<String>,
+    /// ... or a sum of scaled fields of the topic (value = scale · Σ termᵢ.scale · termᵢ.field +
+    /// offset: e.g. a velocity setpoint minus the velocity) ...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub terms: Option<Vec<Term>>,
     /// ... or an attitude setpoint as a quaternion `[w, x, y, z]` ...
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quaternion: Option<[String; 4]>,
@@ -195,6 +249,18 @@ pub struct Input {
     pub scale: f64,
     #[serde(default, skip_serializing_if = "is_zero")]
     pub offset: f64,
+    /// For an Euler setpoint: angles logged with the opposite sign (as `attitude.negate`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub negate: Vec<Angle>,
+}
+
+/// One term of an input's sum.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Term {
+    pub field: String,
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub scale: f64,
 }
 
 fn one() -> f64 {
@@ -254,19 +320,34 @@ impl Profile {
         for (name, scale) in [
             ("attitude.scale", self.attitude.scale),
             ("rates.scale", self.rates.scale),
+            ("position.scale", self.position.scale),
+            ("velocity.scale", self.velocity.scale),
         ] {
             if !(scale.is_finite() && scale != 0.0) {
                 return fail(format!("`{name}` must be a finite non-zero number, got {scale}"));
             }
         }
         for (name, input) in self.inputs.all() {
-            let kinds = [input.field.is_some(), input.quaternion.is_some(), input.euler.is_some()];
+            let kinds = [
+                input.field.is_some(),
+                input.terms.is_some(),
+                input.quaternion.is_some(),
+                input.euler.is_some(),
+            ];
             if kinds.iter().filter(|k| **k).count() != 1 {
                 return fail(format!(
-                    "`inputs.{name}` needs exactly one of `field`, `quaternion` and `euler`"
+                    "`inputs.{name}` needs exactly one of `field`, `terms`, `quaternion` and `euler`"
                 ));
             }
-            let attitude = input.field.is_none();
+            if let Some(terms) = &input.terms {
+                if terms.is_empty() || terms.iter().any(|t| !t.scale.is_finite()) {
+                    return fail(format!("`inputs.{name}.terms`: at least one term, each `scale` finite"));
+                }
+            }
+            if !input.negate.is_empty() && input.euler.is_none() {
+                return fail(format!("`inputs.{name}.negate` is for Euler setpoints (`euler`)"));
+            }
+            let attitude = input.field.is_none() && input.terms.is_none();
             if attitude && (input.angle.is_none() || input.inertial.is_none() || input.body.is_none()) {
                 return fail(format!(
                     "`inputs.{name}`: an attitude setpoint needs `angle` (roll, pitch or yaw), `inertial` and `body`"
@@ -274,12 +355,18 @@ impl Profile {
             }
             if !attitude && (input.angle.is_some() || input.inertial.is_some() || input.body.is_some()) {
                 return fail(format!(
-                    "`inputs.{name}`: `angle`, `inertial` and `body` are for attitude setpoints, not a `field`"
+                    "`inputs.{name}`: `angle`, `inertial` and `body` are for attitude setpoints, not a `field` or `terms`"
                 ));
             }
             if !(input.scale.is_finite() && input.offset.is_finite()) {
                 return fail(format!("`inputs.{name}`: `scale` and `offset` must be finite"));
             }
+        }
+        if !self.attitude.negate.is_empty() && self.attitude.euler.is_none() {
+            return fail("`attitude.negate` is for Euler angles (`euler`), not a quaternion".into());
+        }
+        if !self.rates.negate.is_empty() && self.rates.kind != RatesKind::Euler {
+            return fail("`rates.negate` is for Euler-angle rates (`kind`: `euler`)".into());
         }
         Ok(())
     }
@@ -307,6 +394,10 @@ impl Profile {
         for (_, input) in self.inputs.all() {
             if let Some(f) = &input.field {
                 add(&input.topic, std::slice::from_ref(f));
+            }
+            if let Some(terms) = &input.terms {
+                let fields: Vec<String> = terms.iter().map(|t| t.field.clone()).collect();
+                add(&input.topic, &fields);
             }
             if let Some(q) = &input.quaternion {
                 add(&input.topic, q);

@@ -218,9 +218,17 @@ pub fn load_any(path: &Path, profile: Option<&str>) -> Result<FlightLog, LoadErr
             Format::sniff(&head[..n])
         }
     };
-    let format = match format {
-        None | Some(Format::Csv) => return read_log(path).map_err(LoadError::Log),
-        Some(f) => f,
+    // A CSV is the contract unless the profile maps CSV columns (it has a `time` column).
+    let csv_profile = match (format, profile) {
+        (None | Some(Format::Csv), Some(p)) => {
+            Some(Profile::resolve(p).map_err(LoadError::Import)?).filter(|p| p.time.is_some())
+        }
+        _ => None,
+    };
+    let format = match (format, csv_profile) {
+        (None | Some(Format::Csv), None) => return read_log(path).map_err(LoadError::Log),
+        (None, Some(_)) => Format::Csv,
+        (Some(f), _) => f,
     };
     let Some(profile) = profile else {
         return Err(LoadError::Import(ImportError::new(

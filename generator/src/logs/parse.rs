@@ -51,8 +51,14 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Table, LogError> {
             "the file is empty: expected `# key: value` metadata lines, a header row naming the columns, and data rows",
         ));
     }
+    // Line ends LF or CRLF, or CR alone (old Mac exports: a file with CR and no LF).
+    let end = if text.contains('\r') && !text.contains('\n') {
+        '\r'
+    } else {
+        '\n'
+    };
     let mut lines = text
-        .split('\n')
+        .split(end)
         .enumerate()
         .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)));
 
@@ -241,6 +247,13 @@ fn columns(file: &str, line: usize, header: &str) -> Result<Columns, LogError> {
             ));
         } else if names.len() == 1 && (header.contains(';') || header.contains('\t')) {
             message.push_str(" (the header has one field: the file must be comma separated)");
+        }
+        if missing.len() >= 4 {
+            message.push_str(
+                ". A CSV of another schema is read through an import profile that maps its columns, units and frames: \
+                 `uavgen import --print-profile csv > my.json`, edit it, then `uavgen import FILE --profile my.json --out log.csv` \
+                 (or `--profile my.json` on identify, evaluate, diagnose; docs/import.md)",
+            );
         }
         return Err(LogError::new(
             file,

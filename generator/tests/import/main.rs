@@ -424,7 +424,7 @@ fn cli_import_writes_atomically_and_fails_cleanly() {
     assert!(!out2.exists());
     let r = uavgen(&["import", u, "--profile", "nope", "--out", out2.to_str().unwrap()]);
     assert!(!r.status.success());
-    assert!(stderr(&r).contains("not a preset (px4, mavros, dji-osdk-ros, ardupilot)"));
+    assert!(stderr(&r).contains("not a preset (px4, mavros, dji-osdk-ros, ardupilot, csv)"));
     assert!(!out2.exists());
     let names: Vec<_> = std::fs::read_dir(tmp.path())
         .unwrap()
