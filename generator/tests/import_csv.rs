@@ -213,3 +213,91 @@ fn a_contract_csv_with_cr_line_ends_reads() {
     let b = read_log(&dir.path().join("cr.csv")).unwrap_or_else(|e| panic!("{e}"));
     assert_same_flight(&a, &b, "CR line ends");
 }
+
+/// A contract CSV whose angles are in degrees is refused by the commands that fit or score
+/// models, naming the column, the time and the fix; a `# rate_hz` that contradicts the time
+/// column is warned about and does not split the log into one-row segments.
+#[test]
+fn degrees_are_refused_and_a_wrong_rate_is_survived() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(
+        dir.path(),
+        &[
+            "simulate",
+            "--plant",
+            &repo("plants/nominal.json"),
+            "--duration",
+            "20",
+            "--seed",
+            "3",
+            "--out",
+            "f.csv",
+        ],
+    );
+    assert!(out.status.success());
+    let flight = read_log(&dir.path().join("f.csv")).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("f.csv")).unwrap();
+    // The same flight with roll, pitch, yaw and their rates in degrees.
+    let deg = 180.0 / std::f64::consts::PI;
+    let mut lines = text.lines();
+    let mut degrees = String::new();
+    let header: Vec<&str> = loop {
+        let l = lines.next().unwrap();
+        degrees.push_str(l);
+        degrees.push('\n');
+        if !l.starts_with('#') {
+            break l.split(',').collect();
+        }
+    };
+    let angle_cols: Vec<usize> = ["roll", "pitch", "yaw", "roll_rate", "pitch_rate", "yaw_rate"]
+        .iter()
+        .map(|c| header.iter().position(|h| h == c).unwrap())
+        .collect();
+    for l in lines {
+        let mut cells: Vec<String> = l.split(',').map(str::to_owned).collect();
+        for &c in &angle_cols {
+            cells[c] = (cells[c].parse::<f64>().unwrap() * deg).to_string();
+        }
+        degrees.push_str(&cells.join(","));
+        degrees.push('\n');
+    }
+    std::fs::write(dir.path().join("deg.csv"), degrees).unwrap();
+    let out = run(
+        dir.path(),
+        &["evaluate", "--model", &repo("models/pd_hover.json"), "--log", "deg.csv"],
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("deg.csv: `") && err.contains("the angles look like degrees"),
+        "{err}"
+    );
+    assert!(err.contains("scale` is 0.017453292519943295"), "{err}");
+    // The radian flight itself passes the same check (max tilt of `excite` ≈ 0.35 rad).
+    uavgen::logs::refuse_degrees(&flight).unwrap();
+
+    // `# rate_hz: 300` on a 30 Hz log: a warning, the segments found from the time column.
+    std::fs::write(
+        dir.path().join("rate.csv"),
+        text.replace("# rate_hz: 30", "# rate_hz: 300"),
+    )
+    .unwrap();
+    let wrong = read_log(&dir.path().join("rate.csv")).unwrap();
+    assert_eq!(wrong.segments.len(), flight.segments.len());
+    let warnings = wrong.report.warnings().join("\n");
+    assert!(
+        warnings.contains("gaps and segments are found from the time column"),
+        "{warnings}"
+    );
+    let out = run(
+        dir.path(),
+        &[
+            "evaluate",
+            "--model",
+            &repo("models/pd_hover.json"),
+            "--log",
+            "rate.csv",
+        ],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

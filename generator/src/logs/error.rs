@@ -32,6 +32,8 @@ pub enum LogErrorKind {
     TimeNotIncreasing,
     /// A header but no data rows.
     NoData,
+    /// Roll or pitch beyond ±π/2: the angles look like degrees (the contract is in radians).
+    Degrees,
     /// A metadata line the reader uses is invalid: `rate_hz` not a positive number, or given twice
     /// with different values.
     Metadata,

@@ -27,6 +27,9 @@ pub use crate::model::{DEFAULT_INPUTS as INPUT_COLUMNS, DEFAULT_STATES as STATE_
 
 /// Index of yaw in the state vector.
 pub const YAW: usize = 5;
+/// Roll and pitch in the state (log order).
+const ROLL: usize = 3;
+const PITCH: usize = 4;
 
 /// A row with z at or below this (m) is taken as on the ground (LOG_FORMAT.md's z is the height,
 /// ground at 0): ground contact forces are not flight dynamics, and simulated logs of a heavy
@@ -129,10 +132,13 @@ pub fn parse_log(text: &str, label: &str) -> Result<FlightLog, LogError> {
     let table = parse::parse(text, label)?;
     let measured = segments::measured_period(&table.rows);
     // The nominal period: the metadata rate if given (a contradicting time column shows in the
-    // report's warnings), else the median step.
-    let nominal = match table.rate_hz {
-        Some((hz, _)) => Some(1.0 / hz),
-        None => measured,
+    // report's warnings), else the median step. A metadata rate that would make most steps of a
+    // log of more than [`quality::RATE_TRUSTED_ROWS`] rows gaps (the median step a gap) is not used
+    // to find them: a wrong `# rate_hz` would split the log into single rows.
+    let nominal = match (table.rate_hz, measured) {
+        (Some((hz, _)), Some(p)) if table.rows.len() > quality::RATE_TRUSTED_ROWS && p > GAP_PERIODS / hz => Some(p),
+        (Some((hz, _)), _) => Some(1.0 / hz),
+        (None, m) => m,
     };
 
     let rows = &table.rows;
@@ -200,11 +206,47 @@ impl std::fmt::Display for LoadError {
 
 impl std::error::Error for LoadError {}
 
+/// A roll or pitch beyond ±π/2 (+ 0.05 rad for noise): no multirotor log in radians has one, a
+/// log in degrees almost always does. The error names the time, the column and the fix.
+/// [`load_any`] (identify, evaluate, diagnose) applies it; [`read_log`] reads any valid table.
+pub fn refuse_degrees(log: &FlightLog) -> Result<(), LogError> {
+    const LIMIT: f64 = std::f64::consts::FRAC_PI_2 + 0.05;
+    let worst = log
+        .segments
+        .iter()
+        .flat_map(|s| {
+            s.t.iter()
+                .zip(&s.x)
+                .flat_map(|(t, x)| [(*t, ROLL, x[ROLL]), (*t, PITCH, x[PITCH])])
+        })
+        .max_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
+    match worst {
+        Some((t, col, v)) if v.abs() > LIMIT => Err(LogError::new(
+            &log.source,
+            None,
+            Some(STATE_COLUMNS[col]),
+            LogErrorKind::Degrees,
+            format!(
+                "`{}` is {v} at t = {t} s, beyond ±π/2: the angles look like degrees, and the log contract is in radians (roll, pitch, yaw in rad, their rates in rad/s): convert them, or import the file with a profile whose `scale` is 0.017453292519943295 (docs/import.md)",
+                STATE_COLUMNS[col]
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// Read a flight log of any format uavgen reads: a CSV of the contract as [`read_log`] does, or
 /// a PX4 ULog / MCAP / ROS 1 bag / DataFlash file imported with `profile` (a preset name or a
-/// profile file; docs/import.md) at the position topic's own time stamps. What `--log` and
+/// profile file; docs/import.md) at the position topic's own time stamps, or a CSV of another schema with a profile
+/// that maps its columns. Angles that look like degrees are refused ([`refuse_degrees`]). What `--log` and
 /// `--profile` of identify, evaluate and diagnose do.
 pub fn load_any(path: &Path, profile: Option<&str>) -> Result<FlightLog, LoadError> {
+    let log = load_any_table(path, profile)?;
+    refuse_degrees(&log).map_err(LoadError::Log)?;
+    Ok(log)
+}
+
+fn load_any_table(path: &Path, profile: Option<&str>) -> Result<FlightLog, LoadError> {
     use crate::import::{Format, ImportError, ImportErrorKind, ImportOptions, Profile};
     let label = path.display().to_string();
     let format = match Format::from_extension(path) {

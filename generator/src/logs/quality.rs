@@ -7,6 +7,11 @@ use std::fmt;
 /// A time step that differs from the segment's median period by more than this fraction is irregular.
 pub const IRREGULAR_FRACTION: f64 = 0.10;
 
+/// In a log of more rows than this, a metadata rate under which the median step is a gap is not
+/// used to find gaps (the time column's median step is): a wrong `# rate_hz` would otherwise split
+/// the log into single rows. (Shorter logs keep the metadata: their median says little.)
+pub const RATE_TRUSTED_ROWS: usize = 20;
+
 /// A measured rate that differs from the metadata `rate_hz` by more than this fraction is reported.
 pub const RATE_MISMATCH_FRACTION: f64 = 0.01;
 
@@ -126,10 +131,15 @@ impl QualityReport {
         if let (Some(m), Some(hz), Some(p)) = (self.rate_mismatch(), self.metadata_rate_hz, self.measured_period) {
             if m.abs() > RATE_MISMATCH_FRACTION {
                 w.push(format!(
-                    "the metadata says rate_hz {hz} but the time column is sampled every {} ({} Hz, {:+.1} %)",
+                    "the metadata says rate_hz {hz} but the time column is sampled every {} ({} Hz, {:+.1} %){}",
                     secs(p),
                     hz_of(p),
-                    100.0 * m
+                    100.0 * m,
+                    if self.nominal_period == self.measured_period {
+                        "; gaps and segments are found from the time column"
+                    } else {
+                        ""
+                    }
                 ));
             }
         }
