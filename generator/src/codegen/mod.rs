@@ -354,6 +354,7 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
     if options.c_api {
         let api = c_api::CApi {
             crate_name: &crate_name,
+            qp,
             model,
             options,
             mpc: &mpc,
