@@ -65,6 +65,27 @@ extern "C" {
 #define SINDY_M100_RICCATI_STORAGE_SIZE 96832
 #define SINDY_M100_RICCATI_STORAGE_ALIGN 16
 
+/* Stack: worst-case bytes each function needs on thumbv7em-none-eabihf, -C target-cpu=cortex-m7, release (opt-level 3, LTO), rustc nightly -Z emit-stack-sizes, a call-graph
+ * bound checked by uavgen's CI (scripts/stack_bounds.sh fails when a bound grows past these).
+ * Size a task's stack as the largest it calls plus the task's own frames and the interrupt
+ * frames that can preempt it. */
+#define SINDY_M100_RICCATI_STACK_COST 256
+#define SINDY_M100_RICCATI_STACK_DISCRETE_DYNAMICS 3072
+#define SINDY_M100_RICCATI_STACK_FEEDBACK 23040
+#define SINDY_M100_RICCATI_STACK_FIRST_INPUT 256
+#define SINDY_M100_RICCATI_STACK_INIT 512
+#define SINDY_M100_RICCATI_STACK_LAST_STATUS 256
+#define SINDY_M100_RICCATI_STACK_PLANNED_INPUTS 256
+#define SINDY_M100_RICCATI_STACK_PREDICTED_STATES 256
+#define SINDY_M100_RICCATI_STACK_PREPARE 14848
+#define SINDY_M100_RICCATI_STACK_QP_ITERATIONS 256
+#define SINDY_M100_RICCATI_STACK_SET_DISTURBANCE 512
+#define SINDY_M100_RICCATI_STACK_SET_GUESS 5376
+#define SINDY_M100_RICCATI_STACK_SHIFT 2816
+#define SINDY_M100_RICCATI_STACK_SOLVE 26880
+#define SINDY_M100_RICCATI_STACK_STORAGE_ALIGN 256
+#define SINDY_M100_RICCATI_STACK_STORAGE_SIZE 256
+
 typedef double sindy_m100_riccati_real;
 
 #if defined(__cplusplus)

@@ -331,6 +331,7 @@ extern "C" {{
 #define {up}_STORAGE_SIZE {storage}
 #define {up}_STORAGE_ALIGN {align}
 
+{stack}
 typedef {real} {p}_real;
 
 #if defined(__cplusplus)
@@ -370,6 +371,7 @@ enum {p}_status_code {{
                 float
             ),
             align = STORAGE_ALIGN,
+            stack = super::stack_bounds::header_defines(self.crate_name, self.header),
             codes = STATUS_CODES
                 .iter()
                 .map(|(name, value, doc)| format!("    {up}_{name} = {value}, /* {doc} */\n"))
