@@ -254,3 +254,35 @@ fn the_cli_flag_writes_the_header_and_the_package() {
     assert!(run.status.success());
     assert!(!plain.join("include").exists() && !plain.join("capi").exists());
 }
+
+#[test]
+fn the_header_quotes_the_measured_stack_bounds_only_for_the_measured_crate() {
+    // generated/stack-bounds.json (scripts/stack_bounds.sh) covers sindy_m100 as regenerate.sh makes it
+    // (default options + --c-api): every ABI function gets a <NAME>_STACK_ define, init's ≤ 2 KiB.
+    let options = GenerateOptions {
+        c_api: true,
+        ..GenerateOptions::default()
+    };
+    let generated = generate(&shipped("sindy_m100"), &options).unwrap();
+    let header = file(&generated.files, "include/sindy_m100.h");
+    for f in template_functions() {
+        assert!(
+            header.contains(&format!("#define SINDY_M100_STACK_{} ", f.to_ascii_uppercase())),
+            "no stack bound for {f}"
+        );
+    }
+    let init: u64 = header
+        .lines()
+        .find_map(|l| l.strip_prefix("#define SINDY_M100_STACK_INIT "))
+        .and_then(|v| v.trim().parse().ok())
+        .expect("SINDY_M100_STACK_INIT");
+    assert!((64..=2048).contains(&init), "{init}");
+    let readme = file(&generated.files, "README.md");
+    assert!(readme.contains("| `Mpc::feedback` |"), "{readme}");
+    // Another horizon is another crate: not measured, and the header says so instead of guessing.
+    let other = generate(&shipped("sindy_m100"), &GenerateOptions { horizon: 20, ..options }).unwrap();
+    let header = file(&other.files, "include/sindy_m100.h");
+    assert!(!header.contains("_STACK_"), "{header}");
+    assert!(header.contains("Stack: not measured for this crate"));
+    assert!(file(&other.files, "README.md").contains("Not measured for this crate."));
+}
