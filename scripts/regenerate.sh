@@ -13,4 +13,4 @@ $uavgen --model models/pd_m100.json --horizon 30 --out generated/pd_m100
 # The stage-wise (Riccati interior-point) solver on the same models (`--qp riccati`; `auto` picks
 # the condensed one at these sizes, docs/mpc.md), with the default options (input-rate weight included):
 # tested against the generic reference like the others.
-$uavgen --model models/sindy_m100.json --horizon 30 --qp riccati --crate-name sindy_m100_riccati --out generated/sindy_m100_riccati
+$uavgen --model models/sindy_m100.json --horizon 30 --qp riccati --c-api --crate-name sindy_m100_riccati --out generated/sindy_m100_riccati

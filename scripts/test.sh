@@ -4,7 +4,7 @@
 #  2. checks formatting and clippy;
 #  3. regenerates generated/ and fails if the checked-in crates differ;
 #  4. builds the no_std crates, the C ABI staticlib and the firmware example for thumbv7em-none-eabihf
-#     (no panic path, empty .data);
+#     (no panic path, empty .data), and checks the functions' thumbv7em stack bounds against their limits;
 #  5. runs all unit, property, reference and CLI tests (release build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -85,6 +85,16 @@ if command -v llvm-nm >/dev/null; then
     fi
 else
     echo "llvm-nm not found: skipping the no-panic check of the firmware binaries"
+fi
+
+echo "== thumbv7em stack bounds within their limits (scripts/stack_bounds.sh, generated/stack-bounds.json)"
+# Every Rust API and C ABI function of sindy_m100, sindy_m100_riccati and pd_hover_f32, bounded from
+# the call graph of cortex-m7 builds (nightly: -Z emit-stack-sizes); fails when a bound grows past
+# its limit (the figures the generated headers and READMEs quote).
+if command -v arm-none-eabi-gcc >/dev/null && rustup toolchain list | grep -q '^nightly'; then
+    scripts/stack_bounds.sh
+else
+    echo "arm-none-eabi-gcc or the nightly toolchain missing: skipping the stack bounds" >&2
 fi
 
 echo "== tests"

@@ -13,9 +13,12 @@
  *
  * tests/c_abi.rs runs the same loop through the Rust API and compares the inputs (to 1e-12).
  * Before the loop, the ABI's refusals (NULL, uninitialised storage, too small, overlap, no
- * solution yet) are checked; the program exits with status 1 if one does not behave.
+ * solution yet) are checked; the program exits with status 1 if one does not behave. Then init runs
+ * on a thread with a 16 KiB stack (glibc's smallest) and prepare + feedback + shift on one with
+ * 32 KiB: the solver lives in the caller's storage, not on the stack (an overflow kills the process).
  */
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -115,12 +118,51 @@ static void abi_checks(void) {
     expect("discrete_dynamics(x_next = NULL)", sindy_m100_discrete_dynamics(x0, u, NULL), SINDY_M100_NULL_POINTER);
 }
 
+/* Small-stack threads: init with 16 KiB, three prepare + feedback + shift with 32 KiB. */
+static void *init_thread(void *arg) {
+    (void)arg;
+    real x0[NX] = {0}, u[NU] = {0};
+    expect("init on a 16 KiB stack", sindy_m100_init(&storage, sizeof(storage), x0, u), SINDY_M100_OK);
+    return NULL;
+}
+
+static real small_stack_window[(N + 1) * NX];
+
+static void *step_thread(void *arg) {
+    (void)arg;
+    real x0[NX] = {0}, u[NU];
+    for (int k = 0; k < 3; k++) {
+        expect("prepare on a 32 KiB stack", sindy_m100_prepare(&storage, small_stack_window), SINDY_M100_OK);
+        expect("feedback on a 32 KiB stack", sindy_m100_feedback(&storage, x0, u), SINDY_M100_OK);
+        expect("shift on a 32 KiB stack", sindy_m100_shift(&storage), SINDY_M100_OK);
+    }
+    return NULL;
+}
+
+static void on_stack(size_t bytes, void *(*f)(void *)) {
+    pthread_attr_t attr;
+    pthread_t thread;
+    if (pthread_attr_init(&attr) != 0 || pthread_attr_setstacksize(&attr, bytes) != 0 ||
+        pthread_create(&thread, &attr, f, NULL) != 0 || pthread_join(thread, NULL) != 0) {
+        fprintf(stderr, "small-stack check: cannot run a thread with %zu bytes of stack\n", bytes);
+        failures++;
+    }
+    pthread_attr_destroy(&attr);
+}
+
+static void small_stack_checks(void) {
+    window_at(0, small_stack_window);
+    on_stack(16 * 1024, init_thread);
+    on_stack(32 * 1024, step_thread);
+}
+
 int main(void) {
     abi_checks();
+    small_stack_checks();
     if (failures) {
         return 1;
     }
-    printf("abi-checks ok: storage %zu of %d bytes, align %zu\n", sindy_m100_storage_size(),
+    printf("abi-checks ok (init on 16 KiB, prepare + feedback on 32 KiB threads): storage %zu of %d bytes, align %zu\n", sindy_m100_storage_size(),
            SINDY_M100_STORAGE_SIZE, sindy_m100_storage_align());
 
     /* Start 0.5 m off the first waypoint, at rest. */

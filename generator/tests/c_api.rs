@@ -5,9 +5,9 @@
 use std::fs;
 use std::path::PathBuf;
 use std::process::Command;
-use uavgen::codegen::c_api::{storage_bound, FFI_RS, STATUS_CODES};
+use uavgen::codegen::c_api::{storage_bound, storage_slack, FFI_RS, STATUS_CODES};
 use uavgen::codegen::write::write_all;
-use uavgen::codegen::Float;
+use uavgen::codegen::{Float, QpMethod};
 use uavgen::{generate, GenerateOptions, Model};
 
 fn shipped(name: &str) -> Model {
@@ -75,7 +75,7 @@ fn header_declares_every_abi_function_and_status() {
     );
     assert!(header.contains(&format!(
         "#define SINDY_M100_STORAGE_SIZE {}",
-        storage_bound(12, 4, 30, Float::F64)
+        storage_bound(12, 4, 30, Float::F64, QpMethod::Condensed)
     )));
     assert!(header.contains("typedef double sindy_m100_real;"));
     // The solver crate itself keeps `forbid(unsafe_code)`; only capi/src/ffi.rs has `unsafe`.
@@ -98,14 +98,33 @@ fn header_declares_every_abi_function_and_status() {
 
 #[test]
 fn storage_bound_covers_the_solver() {
-    // size_of::<Mpc>() measured in docs/benchmarks.md / docs/runtime.md: 309 704 (f64) and 154 360
-    // (f32) bytes for N = 30, NX = 12, NU = 4 with the condensing's chains (N·NX·NU reals; the ABI
-    // adds 16 + 48 bytes of its own).
-    let f64_bound = storage_bound(12, 4, 30, Float::F64);
-    let f32_bound = storage_bound(12, 4, 30, Float::F32);
-    assert!((309_704 + 64..322_000).contains(&f64_bound), "{f64_bound}");
-    assert!((154_360 + 64..166_000).contains(&f32_bound), "{f32_bound}");
-    assert_eq!(f64_bound % 64, 0);
+    // size_of of the ABI's Slot (magic, last solution, Mpc) for N = 30, NX = 12, NU = 4, measured
+    // with `<name>_storage_size()` on thumbv7em-none-eabihf (4-byte usize) and x86-64 (8-byte):
+    // condensed f64 310 328 / 310 816 B (the qp's NV + 1 index words), riccati f64 94 760 B
+    // (no usize); the generated crates' compile-time assertions check the same on every build.
+    // The bound covers the solver on both, and exceeds it by at most storage_slack.
+    for (qp, sizes) in [
+        (QpMethod::Condensed, [310_328, 310_816]),
+        (QpMethod::Riccati, [94_760, 94_760]),
+    ] {
+        let bound = storage_bound(12, 4, 30, Float::F64, qp);
+        assert_eq!(bound % 64, 0);
+        for size in sizes {
+            assert!(
+                size <= bound && bound <= size + storage_slack(size),
+                "{qp:?}: {bound} for {size}"
+            );
+        }
+    }
+    // Hand count of the riccati solver's reals: 5·31·12 + 16·30·4 + 4 + 30·144 + 2·30·48 + 30·12 +
+    // 30·16 + 12 = 11 836 reals = 94 688 B (f64), + 48 B of the ABI's header: the bound is that
+    // plus 64, 1/64 and 512, rounded up to 64.
+    assert_eq!(
+        storage_bound(12, 4, 30, Float::F64, QpMethod::Riccati),
+        (94_688 + 48 + 64 + (94_688 + 48 + 64) / 64 + 512usize).div_ceil(64) * 64
+    );
+    let f32_bound = storage_bound(12, 4, 30, Float::F32, QpMethod::Condensed);
+    assert!((154_360 + 64..162_000).contains(&f32_bound), "{f32_bound}");
 }
 
 #[test]
@@ -234,4 +253,36 @@ fn the_cli_flag_writes_the_header_and_the_package() {
         .unwrap();
     assert!(run.status.success());
     assert!(!plain.join("include").exists() && !plain.join("capi").exists());
+}
+
+#[test]
+fn the_header_quotes_the_measured_stack_bounds_only_for_the_measured_crate() {
+    // generated/stack-bounds.json (scripts/stack_bounds.sh) covers sindy_m100 as regenerate.sh makes it
+    // (default options + --c-api): every ABI function gets a <NAME>_STACK_ define, init's ≤ 2 KiB.
+    let options = GenerateOptions {
+        c_api: true,
+        ..GenerateOptions::default()
+    };
+    let generated = generate(&shipped("sindy_m100"), &options).unwrap();
+    let header = file(&generated.files, "include/sindy_m100.h");
+    for f in template_functions() {
+        assert!(
+            header.contains(&format!("#define SINDY_M100_STACK_{} ", f.to_ascii_uppercase())),
+            "no stack bound for {f}"
+        );
+    }
+    let init: u64 = header
+        .lines()
+        .find_map(|l| l.strip_prefix("#define SINDY_M100_STACK_INIT "))
+        .and_then(|v| v.trim().parse().ok())
+        .expect("SINDY_M100_STACK_INIT");
+    assert!((64..=2048).contains(&init), "{init}");
+    let readme = file(&generated.files, "README.md");
+    assert!(readme.contains("| `Mpc::feedback` |"), "{readme}");
+    // Another horizon is another crate: not measured, and the header says so instead of guessing.
+    let other = generate(&shipped("sindy_m100"), &GenerateOptions { horizon: 20, ..options }).unwrap();
+    let header = file(&other.files, "include/sindy_m100.h");
+    assert!(!header.contains("_STACK_"), "{header}");
+    assert!(header.contains("Stack: not measured for this crate"));
+    assert!(file(&other.files, "README.md").contains("Not measured for this crate."));
 }

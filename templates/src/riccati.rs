@@ -148,6 +148,9 @@ pub struct RiccatiIpm {
     /// Affine-scaling slack and multiplier steps (the corrector's c = dt·dλ).
     corr_l: [[Real; NU]; N],
     corr_u: [[Real; NU]; N],
+    /// The step's dt_l, dt_u, dλ_l, dλ_u (`slack_steps`): here rather than on the stack (3.8 KB
+    /// for the M100 crates), so that prepare + feedback fit a small thread (docs/c-api.md, "Stack").
+    steps: SlackSteps,
     /// True when `l`/`k` hold the factorisation for the current iterate's Σ.
     factored: bool,
     regularised: bool,
@@ -202,6 +205,7 @@ impl RiccatiIpm {
             dx: [[0.0; NX]; N + 1],
             corr_l: [[0.0; NU]; N],
             corr_u: [[0.0; NU]; N],
+            steps: [[[0.0; NU]; N]; 4],
             factored: false,
             regularised: false,
         }
@@ -626,11 +630,12 @@ impl RiccatiIpm {
             // Predictor (affine scaling): σ = 0, c = 0.
             self.linear_terms(qp, &r_l, &r_u, 0.0, false, &mut rho);
             self.direction(qp, &rho);
-            let (dt_l, dt_u, dl_l, dl_u) = self.slack_steps(&r_l, &r_u, 0.0, false);
-            let alpha = max_step(&self.t_l, &dt_l, 1.0);
-            let alpha = max_step(&self.t_u, &dt_u, alpha);
-            let alpha = max_step(&self.lam_l, &dl_l, alpha);
-            let alpha = max_step(&self.lam_u, &dl_u, alpha);
+            self.slack_steps(&r_l, &r_u, 0.0, false);
+            let [dt_l, dt_u, dl_l, dl_u] = &self.steps;
+            let alpha = max_step(&self.t_l, dt_l, 1.0);
+            let alpha = max_step(&self.t_u, dt_u, alpha);
+            let alpha = max_step(&self.lam_l, dl_l, alpha);
+            let alpha = max_step(&self.lam_u, dl_u, alpha);
             let mut mu_aff = 0.0;
             for k in 0..N {
                 for i in 0..NU {
@@ -647,11 +652,12 @@ impl RiccatiIpm {
             // Corrector: target σμ, second-order term c = dt_aff · dλ_aff.
             self.linear_terms(qp, &r_l, &r_u, sigma_mu, true, &mut rho);
             self.direction(qp, &rho);
-            let (dt_l, dt_u, dl_l, dl_u) = self.slack_steps(&r_l, &r_u, sigma_mu, true);
-            let alpha = max_step(&self.t_l, &dt_l, 1.0 / STEP_TO_BOUNDARY);
-            let alpha = max_step(&self.t_u, &dt_u, alpha);
-            let alpha = max_step(&self.lam_l, &dl_l, alpha);
-            let alpha = STEP_TO_BOUNDARY * max_step(&self.lam_u, &dl_u, alpha);
+            self.slack_steps(&r_l, &r_u, sigma_mu, true);
+            let [dt_l, dt_u, dl_l, dl_u] = &self.steps;
+            let alpha = max_step(&self.t_l, dt_l, 1.0 / STEP_TO_BOUNDARY);
+            let alpha = max_step(&self.t_u, dt_u, alpha);
+            let alpha = max_step(&self.lam_l, dl_l, alpha);
+            let alpha = STEP_TO_BOUNDARY * max_step(&self.lam_u, dl_u, alpha);
             for k in 0..N {
                 for i in 0..NU {
                     self.v[k][i] += alpha * self.dv[k][i];
@@ -696,15 +702,8 @@ impl RiccatiIpm {
     }
 
     /// dt_l = dv + r_l, dt_u = −dv + r_u, dλ = (σμ − c − λ dt)/t − λ.
-    #[allow(clippy::type_complexity)]
-    fn slack_steps(
-        &self,
-        r_l: &[[Real; NU]; N],
-        r_u: &[[Real; NU]; N],
-        sigma_mu: Real,
-        corrected: bool,
-    ) -> ([[Real; NU]; N], [[Real; NU]; N], [[Real; NU]; N], [[Real; NU]; N]) {
-        let (mut dt_l, mut dt_u, mut dl_l, mut dl_u) = ([[0.0; NU]; N], [[0.0; NU]; N], [[0.0; NU]; N], [[0.0; NU]; N]);
+    fn slack_steps(&mut self, r_l: &[[Real; NU]; N], r_u: &[[Real; NU]; N], sigma_mu: Real, corrected: bool) {
+        let [dt_l, dt_u, dl_l, dl_u] = &mut self.steps;
         for k in 0..N {
             for i in 0..NU {
                 let (c_l, c_u) = if corrected {
@@ -718,9 +717,11 @@ impl RiccatiIpm {
                 dl_u[k][i] = (sigma_mu - c_u - self.lam_u[k][i] * dt_u[k][i]) / self.t_u[k][i] - self.lam_u[k][i];
             }
         }
-        (dt_l, dt_u, dl_l, dl_u)
     }
 }
+
+/// dt_l, dt_u, dλ_l, dλ_u of an interior-point step (`slack_steps`).
+type SlackSteps = [[[Real; NU]; N]; 4];
 
 /// y ← (L Lᵀ)⁻¹ y for a lower-triangular L (forward, then backward substitution).
 #[inline]

@@ -4,13 +4,34 @@
 
 #include <cmath>
 #include <cstring>
+#include <initializer_list>
 
 namespace {
 constexpr double kHoverThrust = 0.5;  // TODO vehicle: normalised hover thrust (PX4's MPC_THR_HOVER)
 constexpr double kVzGain = 0.15;      // TODO vehicle: thrust per m/s of vertical-velocity error
 }  // namespace
 
-UavgenMpc::UavgenMpc() : ScheduledWorkItem(MODULE_NAME, px4::wq_configurations::nav_and_controllers) {}
+namespace {
+constexpr uint16_t max_stack(std::initializer_list<unsigned> v) {
+    unsigned m = 0;
+    for (unsigned x : v) m = x > m ? x : m;
+    return static_cast<uint16_t>(m);
+}
+// The module's own work queue (PX4 creates it on first use). PX4's wq:nav_and_controllers has a
+// 2,240 B stack, far below what the solver needs: the header's measured thumbv7em bounds
+// (SINDY_M100_STACK_*, checked in uavgen's CI), the largest of the calls Run() makes, plus 2 KiB for
+// Run()'s own frame (the reference window, (N+1)·NX doubles = 2,976 B, lives in the object, not
+// on the stack), the C++ wrapper and PX4's work-queue frames. Interrupts run on NuttX's interrupt
+// stack. Priority: nav_and_controllers' (-13).
+constexpr uint16_t kSolverStack = max_stack({SINDY_M100_STACK_INIT, SINDY_M100_STACK_PREPARE,
+                                             SINDY_M100_STACK_FEEDBACK, SINDY_M100_STACK_SHIFT,
+                                             SINDY_M100_STACK_DISCRETE_DYNAMICS});
+constexpr px4::wq_config_t kUavgenMpcWorkQueue{"wq:uavgen_mpc", static_cast<uint16_t>(kSolverStack + 2048), -13};
+static_assert(kUavgenMpcWorkQueue.stacksize > px4::wq_configurations::nav_and_controllers.stacksize,
+              "the solver does not fit PX4's nav_and_controllers stack");
+}  // namespace
+
+UavgenMpc::UavgenMpc() : ScheduledWorkItem(MODULE_NAME, kUavgenMpcWorkQueue) {}
 
 bool UavgenMpc::init() {
     // The model's rate: DT = 1/30 s.

@@ -60,10 +60,31 @@ extern "C" {
 #define SINDY_M100_DISTURBANCE_GAIN 0.5
 #define SINDY_M100_DISTURBANCE_BOUND { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.03333333333333333, 0.03333333333333333, 0.03333333333333333, 0.0, 0.0, 0.0 }
 
-/* Caller-owned solver storage: an upper bound of the solver's size (sindy_m100_storage_size() returns
- * the exact size) and its alignment. */
-#define SINDY_M100_STORAGE_SIZE 314432
+/* Caller-owned solver storage: the solver's size with a little headroom (at most 1/32 + 2 KiB above
+ * it, checked when the library is built; sindy_m100_storage_size() returns the exact size) and its alignment. */
+#define SINDY_M100_STORAGE_SIZE 316288
 #define SINDY_M100_STORAGE_ALIGN 16
+
+/* Stack: worst-case bytes each function needs on thumbv7em-none-eabihf, -C target-cpu=cortex-m7, release (opt-level 3, LTO), rustc nightly -Z emit-stack-sizes, a call-graph
+ * bound checked by uavgen's CI (scripts/stack_bounds.sh fails when a bound grows past these).
+ * Size a task's stack as the largest it calls plus the task's own frames and the interrupt
+ * frames that can preempt it. */
+#define SINDY_M100_STACK_COST 256
+#define SINDY_M100_STACK_DISCRETE_DYNAMICS 2048
+#define SINDY_M100_STACK_FEEDBACK 17408
+#define SINDY_M100_STACK_FIRST_INPUT 256
+#define SINDY_M100_STACK_INIT 512
+#define SINDY_M100_STACK_LAST_STATUS 256
+#define SINDY_M100_STACK_PLANNED_INPUTS 256
+#define SINDY_M100_STACK_PREDICTED_STATES 256
+#define SINDY_M100_STACK_PREPARE 11520
+#define SINDY_M100_STACK_QP_ITERATIONS 256
+#define SINDY_M100_STACK_SET_DISTURBANCE 512
+#define SINDY_M100_STACK_SET_GUESS 5120
+#define SINDY_M100_STACK_SHIFT 2048
+#define SINDY_M100_STACK_SOLVE 21248
+#define SINDY_M100_STACK_STORAGE_ALIGN 256
+#define SINDY_M100_STACK_STORAGE_SIZE 256
 
 typedef double sindy_m100_real;
 

@@ -18,7 +18,7 @@
 //! The ABI uses only the public API of `Mpc` (`new`, `initialize`, `set_guess`, `prepare`,
 //! `feedback`, `solve`, `shift`, `set_disturbance`, `planned_inputs`, `predicted_states`) and `discrete_dynamics`.
 
-use super::{Float, GenerateOptions};
+use super::{Float, GenerateOptions, QpMethod};
 use crate::model::Model;
 use crate::mpc_options::MpcOptions;
 
@@ -81,24 +81,56 @@ pub const STATUS_CODES: &[(&str, i32, &str)] = &[
     ("NO_SOLUTION", -6, "no feedback() or solve() since init()"),
 ];
 
-/// `<NAME>_STORAGE_SIZE`: an upper bound of the solver state in bytes, from the sizes alone.
+/// `<NAME>_STORAGE_SIZE`: the solver state's size in bytes, from the sizes and the QP solver.
 ///
-/// The generator does not compile the crate, so it cannot know `size_of::<Mpc>()` exactly; the
-/// bound counts the solver's arrays (guess, reference, linearisation, condensing chains, condensed
-/// QP, the QP's factor and vectors, the disturbance: 3(N+1)NX + N·NU + N·NX² + 2·N·NX·NU + N·NX +
-/// 2·NV² + 12·NV + NX reals, the last 4 NV spare) plus 8-byte words for index arrays and flags, rounded up to 64. `capi/src/lib.rs`
-/// asserts at compile time that the solver fits, so a solver that outgrows the bound fails to
-/// build instead of overrunning the caller's buffer; `<name>_storage_size()` returns the exact
-/// size at run time.
-pub fn storage_bound(nx: usize, nu: usize, n: usize, float: Float) -> usize {
+/// The generator does not compile the crate, so it cannot know `size_of::<Slot>()` exactly; it
+/// counts the fields of the template's `Mpc` (and of its QP solver's workspace), which are all
+/// arrays of reals sized by NX, NU, N and NV = N·NU:
+///
+/// - condensed (`mpc.rs` + `qp.rs`): guess, reference, free response ((N+1)·NX each), inputs
+///   (N·NU), u₋₁ (NU), Aₖ (N·NX²), Bₖ and the condensing's chains (N·NX·NU each), cₖ (N·NX), the
+///   Hessian and the QP's factor (NV² each), 9 vectors of NV, the disturbance (NX); NV + 1 index
+///   words (counted as 8 bytes, the largest `usize`) and 2·NV bytes of bound states and groups;
+/// - riccati (`mpc_riccati.rs` + `riccati.rs`): 5 trajectories of (N+1)·NX (guess, reference,
+///   defects' workspace, the IPM's x and dx), 16 of N·NU (inputs, box, the IPM's iterate,
+///   direction, corrector and steps), u₋₁ (NU), Aₖ (N·NX²), Bₖ and the
+///   feedback gains (N·NX·NU each), cₖ (N·NX), the input Hessians' factors (N·NU²), the
+///   disturbance (NX);
+///
+/// plus the C ABI's own header (magic number, the latest input, status, iterations and cost) and
+/// 64 bytes of flags and padding, with a headroom of 1/64 and 512 bytes (rounded up to 64), so that
+/// a few more fields in the template do not break the build. `capi/src/lib.rs` asserts at compile
+/// time that the solver fits (a solver that outgrows the figure fails to build instead of overrunning
+/// the caller's buffer) and that the figure is at most 1/32 + 2 KiB above the solver's real size
+/// (the caller's buffer is not wasted); `<name>_storage_size()` returns the exact size at run time.
+pub fn storage_bound(nx: usize, nu: usize, n: usize, float: Float, qp: QpMethod) -> usize {
     let nv = n * nu;
-    let reals = 3 * (n + 1) * nx + n * nu + n * nx * nx + 2 * n * nx * nu + n * nx + 2 * nv * nv + 12 * nv + nx;
+    let (reals, words, bytes) = match qp {
+        QpMethod::Condensed => (
+            3 * (n + 1) * nx + n * nu + nu + n * nx * nx + 2 * n * nx * nu + n * nx + 2 * nv * nv + 9 * nv + nx,
+            nv + 1,
+            2 * nv,
+        ),
+        QpMethod::Riccati => (
+            5 * (n + 1) * nx + 16 * n * nu + nu + n * nx * nx + 2 * n * nx * nu + n * nx + n * nu * nu + nx,
+            0,
+            0,
+        ),
+    };
     let real = match float {
         Float::F64 => 8,
         Float::F32 => 4,
     };
-    let bytes = real * reals + 8 * (2 * nv + 8) + 64;
-    bytes.div_ceil(64) * 64
+    // The ABI's header: the magic number, and `Last` (u0, status, iterations, cost).
+    let abi = 8 + real * (nu + 1) + 8;
+    let size = real * reals + 8 * words + bytes + abi + 64;
+    (size + size / 64 + 512).div_ceil(64) * 64
+}
+
+/// How much `STORAGE_SIZE` may exceed the solver's real size (`size_of::<Slot>()`), asserted at
+/// compile time by `capi/src/lib.rs`: 1/32 of it and 2 KiB.
+pub fn storage_slack(size: usize) -> usize {
+    size / 32 + 2048
 }
 
 /// The identifier prefix of the C symbols: the crate name with `-` as `_`.
@@ -162,6 +194,8 @@ fn c_string(s: &str) -> String {
 /// Everything about a model the C header and the ABI crate need.
 pub struct CApi<'a> {
     pub crate_name: &'a str,
+    /// The QP solver the crate carries (its storage differs).
+    pub qp: QpMethod,
     pub model: &'a Model,
     pub options: &'a GenerateOptions,
     pub mpc: &'a MpcOptions,
@@ -215,7 +249,7 @@ impl CApi<'_> {
             Float::F64 => "double",
             Float::F32 => "float",
         };
-        let storage = storage_bound(nx, nu, n, float);
+        let storage = storage_bound(nx, nu, n, float, self.qp);
         let mut h = String::new();
         for l in self.header {
             h.push_str(&format!("/* {} */\n", l.replace("*/", "* /")));
@@ -292,11 +326,12 @@ extern "C" {{
 #define {up}_DISTURBANCE_GAIN {disturbance_gain}
 #define {up}_DISTURBANCE_BOUND {disturbance_bound}
 
-/* Caller-owned solver storage: an upper bound of the solver's size ({p}_storage_size() returns
- * the exact size) and its alignment. */
+/* Caller-owned solver storage: the solver's size with a little headroom (at most 1/32 + 2 KiB above
+ * it, checked when the library is built; {p}_storage_size() returns the exact size) and its alignment. */
 #define {up}_STORAGE_SIZE {storage}
 #define {up}_STORAGE_ALIGN {align}
 
+{stack}
 typedef {real} {p}_real;
 
 #if defined(__cplusplus)
@@ -336,6 +371,7 @@ enum {p}_status_code {{
                 float
             ),
             align = STORAGE_ALIGN,
+            stack = super::stack_bounds::header_defines(self.crate_name, self.header),
             codes = STATUS_CODES
                 .iter()
                 .map(|(name, value, doc)| format!("    {up}_{name} = {value}, /* {doc} */\n"))
@@ -477,7 +513,7 @@ fn panic(_: &core::panic::PanicInfo) -> ! {{
             ("@STATUS_CODES@", codes),
             (
                 "@STORAGE_SIZE@",
-                storage_bound(nx, nu, n, self.options.float).to_string(),
+                storage_bound(nx, nu, n, self.options.float, self.qp).to_string(),
             ),
             ("@STORAGE_ALIGN@", STORAGE_ALIGN.to_string()),
             ("@NX@", nx.to_string()),

@@ -8,6 +8,7 @@ mod lib_rs;
 mod manifest;
 pub mod model_rs;
 pub mod splice;
+pub mod stack_bounds;
 pub mod write;
 
 use crate::discretize::{auto_substeps, Envelope, SubstepChoice, SubstepError};
@@ -313,7 +314,8 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
         ),
         (
             PathBuf::from("README.md"),
-            manifest::readme(&crate_name, model, options, substeps, &head),
+            manifest::readme(&crate_name, model, options, substeps, &head)
+                + &stack_bounds::readme_section(&crate_name, &head),
         ),
         (
             PathBuf::from("src/lib.rs"),
@@ -354,6 +356,7 @@ pub fn generate(model: &Model, options: &GenerateOptions) -> Result<GeneratedCra
     if options.c_api {
         let api = c_api::CApi {
             crate_name: &crate_name,
+            qp,
             model,
             options,
             mpc: &mpc,

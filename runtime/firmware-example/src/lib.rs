@@ -155,3 +155,96 @@ where
         while (DWT::cycle_count().wrapping_sub(tick) as i32) < 0 {}
     }
 }
+
+/// The stack probes of a generated crate's Rust API (scripts/stack_bounds.sh): one
+/// `#[inline(never)]` function `stack_probe_<fn>` per public function, each calling only that one,
+/// and `stack_probe_all`, which calls them all (so that they are linked). scripts/stack_bound.py
+/// bounds each probe's stack from the linked ELF's call graph; a probe's own frame is counted too,
+/// so the bound is the function's plus a few words.
+#[macro_export]
+macro_rules! stack_probes {
+    ($krate:ident) => {
+        use $krate::{Mpc, Real, Solution, Status, N, NU, NX};
+
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_new(m: &mut Mpc) {
+            // The way to reset a solver at run time: from the constant (a memset); `*m = Mpc::new()`
+            // may build the solver in this frame first.
+            *m = const { Mpc::new() };
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_initialize(m: &mut Mpc, x0: &[Real; NX], u: &[Real; NU]) {
+            m.initialize(x0, u)
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_set_guess(m: &mut Mpc, xs: &[[Real; NX]; N + 1], us: &[[Real; NU]; N]) -> bool {
+            m.set_guess(xs, us)
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_set_disturbance(m: &mut Mpc, e: &[Real; NX]) -> bool {
+            m.set_disturbance(e)
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_prepare(m: &mut Mpc, r: &[[Real; NX]; N + 1]) -> Status {
+            m.prepare(r)
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_feedback(m: &mut Mpc, x0: &[Real; NX]) -> Solution {
+            m.feedback(x0)
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_solve(m: &mut Mpc, x0: &[Real; NX], r: &[[Real; NX]; N + 1]) -> Solution {
+            m.solve(x0, r)
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_shift(m: &mut Mpc) {
+            m.shift()
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_planned_inputs(m: &Mpc, out: &mut [[Real; NU]; N]) {
+            *out = *m.planned_inputs();
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_predicted_states(m: &Mpc, out: &mut [[Real; NX]; N + 1]) {
+            *out = *m.predicted_states();
+        }
+        #[no_mangle]
+        #[inline(never)]
+        pub fn stack_probe_discrete_dynamics(x: &[Real; NX], u: &[Real; NU]) -> [Real; NX] {
+            $krate::discrete_dynamics(x, u)
+        }
+
+        /// Every probe once, through `black_box` (nothing is folded away).
+        #[inline(never)]
+        pub fn stack_probe_all(m: &'static mut Mpc) {
+            use core::hint::black_box;
+            let x0 = black_box([0.0 as Real; NX]);
+            let u = black_box([0.0 as Real; NU]);
+            let r = black_box([x0; N + 1]);
+            let mut us = [u; N];
+            let mut xs = r;
+            stack_probe_new(m);
+            stack_probe_initialize(m, &x0, &u);
+            black_box(stack_probe_set_guess(m, &r, &us));
+            black_box(stack_probe_set_disturbance(m, &x0));
+            black_box(stack_probe_prepare(m, &r));
+            black_box(stack_probe_feedback(m, &x0));
+            black_box(stack_probe_solve(m, &x0, &r));
+            stack_probe_shift(m);
+            stack_probe_planned_inputs(m, &mut us);
+            stack_probe_predicted_states(m, &mut xs);
+            black_box((us, xs));
+            black_box(stack_probe_discrete_dynamics(&x0, &u));
+        }
+    };
+}

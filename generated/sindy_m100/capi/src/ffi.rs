@@ -56,9 +56,10 @@ pub mod status {
     pub const NO_SOLUTION: i32 = -6;
 }
 
-/// `<NAME>_STORAGE_SIZE`: an upper bound of [`storage_size`](sindy_m100_storage_size), computed by
-/// the generator from the sizes alone.
-pub const STORAGE_SIZE: usize = 314432;
+/// `<NAME>_STORAGE_SIZE`: the size of the solver state with a little headroom (at least
+/// [`storage_size`](sindy_m100_storage_size), at most 1/32 + 2 KiB more), computed by the
+/// generator from the sizes and the QP solver.
+pub const STORAGE_SIZE: usize = 316288;
 /// `<NAME>_STORAGE_ALIGN`.
 pub const STORAGE_ALIGN: usize = 16;
 
@@ -67,6 +68,11 @@ pub const STORAGE_ALIGN: usize = 16;
 const _: () = assert!(NX == 12 && NU == 4 && N == 30, "the solver's sizes differ from the header's");
 const _: () = assert!(size_of::<Real>() == 8, "Real differs from the header's typedef");
 const _: () = assert!(size_of::<Slot>() <= STORAGE_SIZE, "the solver outgrew STORAGE_SIZE (uavgen: c_api::storage_bound)");
+// Nor may the header ask for much more than the solver needs (uavgen: c_api::storage_slack).
+const _: () = assert!(
+    STORAGE_SIZE <= size_of::<Slot>() + size_of::<Slot>() / 32 + 2048,
+    "STORAGE_SIZE is far larger than the solver (uavgen: c_api::storage_bound)"
+);
 const _: () = assert!(align_of::<Slot>() <= STORAGE_ALIGN, "the solver needs more than STORAGE_ALIGN");
 
 /// Marks storage initialised by this model's `init`: the first 8 bytes of the model's SHA-256.
@@ -232,11 +238,13 @@ pub unsafe extern "C" fn sindy_m100_init(
         // SAFETY: by the contract.
         let (x0, u): ([Real; NX], [Real; NU]) = unsafe { (read(slot, x0)?, read(slot, u)?) };
         // SAFETY: `slot` is non-null, aligned and points to at least size_of::<Slot>() writable
-        // bytes (checked above); the fields are written in place (`Mpc::new()` is all zeros, a
-        // memset: no solver-sized temporary), nothing is dropped (no drop glue), and the magic
-        // number goes last, so that a storage is never half initialised and marked.
+        // bytes (checked above); the fields are written in place, nothing is dropped (no drop
+        // glue), and the magic number goes last, so that a storage is never half initialised and
+        // marked. The solver is written from a constant (`const { Mpc::new() }`, all zero bits: a
+        // memset into the storage), not from a value built at run time, which rustc would build
+        // in this function's frame first (a solver-sized stack temporary: 310 KB for sindy_m100).
         unsafe {
-            ptr::addr_of_mut!((*slot).mpc).write(Mpc::new());
+            ptr::addr_of_mut!((*slot).mpc).write(const { Mpc::new() });
             ptr::addr_of_mut!((*slot).last).write(Last {
                 u0: [0.0; NU],
                 status: status::NO_SOLUTION,
