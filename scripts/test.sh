@@ -12,6 +12,11 @@ cd "$(dirname "$0")/.."
 echo "== setup"
 rustup target add thumbv7em-none-eabihf >/dev/null
 rustup component add clippy rustfmt >/dev/null 2>&1 || true
+# The Cortex-M toolchain (C ABI link, stack bounds) from Debian's packages, where we may install.
+if ! command -v arm-none-eabi-gcc >/dev/null && command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    (apt-get update -qq && apt-get install -y -qq gcc-arm-none-eabi) >/dev/null 2>&1 ||
+        echo "could not install gcc-arm-none-eabi: the Cortex-M link and stack-bound steps will be skipped" >&2
+fi
 
 echo "== format and lints"
 cargo fmt --all -- --check
