@@ -122,7 +122,7 @@ def rotorpy_true_model(truth_path, out):
 WITHHELD = [("linear_drag", "linear_drag"), ("latency", "latency")]
 
 
-def diagnose_class(u, c, out, train_s, test_s):
+def diagnose_class(u, c, out, train_s, test_s, withheld):
     """Diagnose on withheld effects: a SINDy base model identified (defaults) on flights of the
     class's plant without the effect, diagnosed (defaults, horizon 1 s) against training and
     held-out `excite` flights of the full plant. Returns one row per withheld effect."""
@@ -132,7 +132,7 @@ def diagnose_class(u, c, out, train_s, test_s):
     os.makedirs(os.path.join(ROOT, d), exist_ok=True)
     rows = []
     for effect, expect in WITHHELD:
-        if effect not in plant.get("effects", {}):
+        if effect not in withheld or effect not in plant.get("effects", {}):
             continue
         reduced = json.loads(json.dumps(plant))
         del reduced["effects"][effect]
@@ -185,6 +185,8 @@ def main():
     ap.add_argument("--uavgen", default="target/release/uavgen")
     ap.add_argument("--diagnose", action="store_true",
                     help="also diagnose withheld effects per class (docs/diagnosis.md#results-per-vehicle-class)")
+    ap.add_argument("--diagnose-only", action="store_true", help="only the diagnosis on withheld effects")
+    ap.add_argument("--withheld", default="linear_drag,latency", help="effects withheld from the diagnosis' base models")
     ap.add_argument("--rotorpy-dir", default=ROTORPY_DIR,
                     help="RotorPy Crazyflie logs (scripts/rotorpy_crazyflie.py --out DIR); default the committed ones")
     args = ap.parse_args()
@@ -202,7 +204,7 @@ def main():
     classes.sort(key=lambda c: c == "m100")
     results = []
     timings = []
-    for c in classes:
+    for c in [] if args.diagnose_only else classes:
         d = f"{out}/{c}"
         os.makedirs(os.path.join(ROOT, d), exist_ok=True)
         if c == "rotorpy_cf":
@@ -224,8 +226,12 @@ def main():
                 timings.append((c, v, method, sec))
                 models[method] = mp if rc == 0 else None
             models["true"] = f"{d}/true.json"
-            other = f"{out}/px4/sindy_{v}.json" if c == "m100" else "models/sindy_m100.json"
-            models["other"] = other if os.path.exists(os.path.join(ROOT, other)) else None
+            # Another class's model: the shipped M100 SINDy model; on the M100 class, the px4 class's
+            # SINDy model of the same variant (else of `excite`, else px4's true model).
+            others = ([f"{out}/px4/sindy_{v}.json", f"{out}/px4/sindy_excite.json", f"{out}/px4/true.json"]
+                      if c == "m100" else ["models/sindy_m100.json"])
+            other = next((o for o in others if os.path.exists(os.path.join(ROOT, o))), None)
+            models["other"] = other
             row = {"class": c, "variant": v, "rate_hz": round(rate, 3), "horizons": hs, "train": train,
                    "test": test, "other_model": other, "models": {}}
             for name, mp in models.items():
@@ -234,10 +240,10 @@ def main():
             results.append(row)
             print_row(row, sys.stderr)
     diag = []
-    if args.diagnose:
+    if args.diagnose or args.diagnose_only:
         for c in classes:
             if c in PLANTS:
-                diag += diagnose_class(u, c, out, args.train_s, args.test_s)
+                diag += diagnose_class(u, c, out, args.train_s, args.test_s, args.withheld.split(","))
         print("Diagnosis on withheld effects (base: SINDy of the plant without the effect; full plant's flights):")
         print()
         print("| class | withheld | in the plant | diagnose's corrections |")
@@ -245,9 +251,12 @@ def main():
         for r in diag:
             print(f"| {r['class']} | {r['withheld']} | {json.dumps(r['truth'])} | {json.dumps(r['verdict'])} |")
         print()
-    json.dump({"results": results, "identify_seconds": timings, "diagnose": diag}, open(os.path.join(ROOT, out, f"results_{'_'.join(classes)}.json"), "w"),
+    tag = "diagnose_" if args.diagnose_only else ""
+    json.dump({"results": results, "identify_seconds": timings, "diagnose": diag},
+              open(os.path.join(ROOT, out, f"results_{tag}{'_'.join(classes)}.json"), "w"),
               indent=1)
-    print_table(results, timings)
+    if results:
+        print_table(results, timings)
 
 
 def fmt(e, nc):
