@@ -184,7 +184,7 @@ def main():
     ap.add_argument("--test-s", type=float, default=60)
     ap.add_argument("--uavgen", default="target/release/uavgen")
     ap.add_argument("--diagnose", action="store_true",
-                    help="also diagnose withheld effects per class (docs/diagnosis.md#results-per-vehicle-class)")
+                    help="also diagnose withheld effects per class (docs/diagnosis.md#results-per-vehicle-class-issue-27)")
     ap.add_argument("--diagnose-only", action="store_true", help="only the diagnosis on withheld effects")
     ap.add_argument("--withheld", default="linear_drag,latency", help="effects withheld from the diagnosis' base models")
     ap.add_argument("--rotorpy-dir", default=ROTORPY_DIR,

@@ -1,4 +1,4 @@
-//! The aircraft bed in CI (issue 27; docs/identification.md#results-per-vehicle-class): each vehicle
+//! The aircraft bed in CI (issue 27; docs/identification.md#results-per-vehicle-class-issue-27): each vehicle
 //! class on reduced data — default `identify --method sindy` and `--method pd` on a short training
 //! flight, `evaluate` on a held-out flight at horizons of 0.3 s and 1 s against the predict-no-change
 //! baseline `evaluate` reports. The full figures come from scripts/aircraft_bed_results.py.
@@ -7,10 +7,12 @@
 //! (plants/px4_quad.json, 50 Hz) and RotorPy's Crazyflie (tests/data/rotorpy_cf/, written by
 //! scripts/rotorpy_crazyflie.py; no code of ours simulated it).
 //!
-//! The thresholds marked `TIGHTEN(issue 27)` hold for today's identify and are below the issue's
-//! acceptance (≥ 20 % below no-change, below another class's model, no diverged run): the
-//! coordinator raises them to the acceptance values once the identification work of issue 27
-//! (ident-adapt, ident-speed) is merged and scripts/aircraft_bed_results.py shows they hold.
+//! The thresholds are issue 27's acceptance (≥ 20 % below predict-no-change, below another class's
+//! model, no diverged run), which these reduced cases meet with today's identify because their
+//! training flights mix heading-excited and heading-held segments. TIGHTEN(issue 27): the held-out
+//! flight is heading-held, but a training set of heading-held flights only (the issue's nano case) is
+//! not here yet — identify refuses it today (docs/identification.md#results-per-vehicle-class-issue-27);
+//! add it once the identification work of issue 27 (ident-adapt) is merged.
 
 mod common;
 
@@ -19,16 +21,15 @@ use std::path::{Path, PathBuf};
 use uavgen::evaluate::{evaluate, EvaluateOptions};
 use uavgen::logs::parse_log;
 
-/// TIGHTEN(issue 27): the ratio model / predict-no-change each identified model must stay below at
-/// both horizons. Acceptance: 0.8.
-const MAX_RATIO_TO_NO_CHANGE: f64 = 1.0;
-/// TIGHTEN(issue 27): the largest fraction of diverged horizon runs allowed per model and horizon.
-/// Acceptance: 0.
-const MAX_DIVERGED_FRACTION: f64 = 0.05;
-/// TIGHTEN(issue 27): each identified model's horizon RMSE must stay below this factor times that of
-/// a model of another class (the shipped models/sindy_m100.json; not checked on the M100 class).
-/// Acceptance: 1.0.
-const MAX_RATIO_TO_OTHER_CLASS: f64 = 2.0;
+/// The ratio model / predict-no-change each identified model must stay below at both horizons
+/// (issue 27: ≥ 20 % below). Today's largest: 0.34 (nano PD at 0.3 s).
+const MAX_RATIO_TO_NO_CHANGE: f64 = 0.8;
+/// The largest fraction of diverged horizon runs allowed per model and horizon (issue 27: none).
+const MAX_DIVERGED_FRACTION: f64 = 0.0;
+/// Each identified model's horizon RMSE must stay below this factor times that of a model of another
+/// class (the shipped models/sindy_m100.json; not checked on the M100 class). Today's largest
+/// ratio: 0.78 (nano PD at 1 s).
+const MAX_RATIO_TO_OTHER_CLASS: f64 = 1.0;
 
 /// Overall horizon RMSE, its no-change baseline and the diverged runs of `model` on `log`.
 fn horizon_figures(model: &Path, log: &Path, horizon: usize, json: &Path) -> (f64, f64, usize, usize) {
@@ -102,7 +103,6 @@ fn check_class(class: &str, train: &[PathBuf], test: &Path, rate_hz: f64, dir: &
                  (ratio {:.2}), {diverged} of {runs} runs diverged",
                 rmse / no_change
             );
-            // Firm: a model of the aircraft must predict better than assuming nothing changes.
             assert!(
                 rmse < MAX_RATIO_TO_NO_CHANGE * no_change,
                 "{class} {method} at {seconds}: horizon RMSE {rmse:.4} not below {MAX_RATIO_TO_NO_CHANGE} × \
