@@ -17,7 +17,8 @@ pub struct EvaluateArgs {
     /// another schema (`uavgen import --print-profile csv`; docs/import.md).
     #[arg(long)]
     profile: Option<String>,
-    /// Free-run horizon in samples (the MPC's).
+    /// Free-run horizon in samples (the MPC's; seconds × the log's rate). Its figures come with the
+    /// predict-no-change baseline over the same runs (every step predicted as the run's first state).
     #[arg(long, default_value_t = 30)]
     horizon: usize,
     /// RK4 substeps per sample (default: the automatic rule).

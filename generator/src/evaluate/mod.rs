@@ -137,6 +137,10 @@ pub struct Horizon {
     /// Overall RMSE (all states pooled) at each step 1..=horizon, over the runs that reached
     /// that step; `null` where none did.
     pub rmse_by_step: Vec<Option<f64>>,
+    /// The predict-no-change baseline over the same runs and steps: every step of a run
+    /// predicted as the run's first (logged) state. A model is worth flying only if its
+    /// `metrics` beat this.
+    pub no_change: Option<Metrics>,
 }
 
 /// Free runs over whole segments, pooled.
@@ -299,6 +303,7 @@ struct Acc {
     next_made: usize,
     horizon: Pool,
     horizon_end: Pool,
+    horizon_no_change: Pool,
     steps: StepErrors,
     horizon_runs: usize,
     horizon_diverged: usize,
@@ -317,6 +322,7 @@ impl Acc {
             next_made: 0,
             horizon: Pool::default(),
             horizon_end: Pool::default(),
+            horizon_no_change: Pool::default(),
             steps: StepErrors::new(h),
             horizon_runs: 0,
             horizon_diverged: 0,
@@ -334,6 +340,7 @@ impl Acc {
         self.next_made += o.next_made;
         self.horizon.extend(&o.horizon);
         self.horizon_end.extend(&o.horizon_end);
+        self.horizon_no_change.extend(&o.horizon_no_change);
         self.steps.merge(&o.steps);
         self.horizon_runs += o.horizon_runs;
         self.horizon_diverged += o.horizon_diverged;
@@ -364,6 +371,7 @@ impl Acc {
             metrics: self.horizon.metrics(names)?,
             end: self.horizon_end.metrics(names)?,
             rmse_by_step: self.steps.rmse(),
+            no_change: self.horizon_no_change.metrics(names)?,
         };
         let whole = WholeFlight {
             runs: self.whole_runs,
@@ -560,6 +568,9 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
                     continue;
                 }
                 runs += 1;
+                for j in 1..=h {
+                    acc.horizon_no_change.push(&seg.x[k], &seg.x[k + j], Some(YAW));
+                }
                 let pred = horizon_run(&st, seg, &inputs, k, h, dt, m);
                 for (j, p) in pred.iter().enumerate() {
                     acc.horizon.push(p, &seg.x[k + j + 1], Some(YAW));
@@ -734,6 +745,7 @@ impl fmt::Display for Evaluation {
             h.runs
         )?;
         writeln!(f, "  at the end of the horizon:        {}", overall(&h.end))?;
+        writeln!(f, "  predict-no-change, same runs:     {}", overall(&h.no_change))?;
         let w = &self.whole_flight;
         writeln!(
             f,
