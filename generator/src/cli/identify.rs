@@ -83,7 +83,8 @@ pub struct IdentifyArgs {
     #[arg(long)]
     force: bool,
     /// Savitzky-Golay window (odd, samples) for derivatives. Default: the odd sample count nearest
-    /// 0.3 s at the logs' median sample period (9 at 30 Hz, 15 at 50 Hz, 31 at 100 Hz).
+    /// 0.3 s at the logs' sample period (the slowest log's median; 9 at 30 Hz, 15 at 50 Hz, 31 at
+    /// 100 Hz).
     #[arg(long)]
     savgol_window: Option<usize>,
     /// Savitzky-Golay polynomial order.
@@ -348,8 +349,8 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             args.logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
         ));
     }
-    // Everything rate-dependent is set in seconds and converted at the logs' median period.
-    let dt = median_period(&logs).unwrap_or(1.0 / 30.0);
+    // Everything rate-dependent is set in seconds and converted at the logs' sample period.
+    let dt = sample_period(&logs).unwrap_or(1.0 / 30.0);
     let savgol = check_savgol(
         args.savgol_window
             .unwrap_or_else(|| savgol_window(dt, args.savgol_order)),
@@ -854,6 +855,15 @@ fn refine_delays(
 
 /// The free runs of the delay refinement, s (one MPC horizon).
 const REFINE_HORIZON_S: f64 = 1.0;
+
+/// The sample period at which `identify` converts its durations to samples: the slowest log's
+/// (the largest of the logs' median periods). With logs of one rate that is their period; the
+/// M100's runs at 0.030 s and 0.0333 s give 0.0333 s (30 Hz).
+fn sample_period(logs: &[uavgen::logs::FlightLog]) -> Option<f64> {
+    logs.iter()
+        .filter_map(|l| median_period(std::slice::from_ref(l)))
+        .reduce(f64::max)
+}
 
 /// The median sample period over every segment of `logs`.
 fn median_period(logs: &[uavgen::logs::FlightLog]) -> Option<f64> {

@@ -136,7 +136,7 @@ impl Excitation {
     /// side; `None` (anywhere) when that covers the circle.
     pub fn yaw_range(&self) -> Option<(f64, f64)> {
         let half = 0.5 * self.heading_arc + YAW_MARGIN;
-        (half < PI).then(|| (self.heading_centre - half, self.heading_centre + half))
+        (half < PI).then_some((self.heading_centre - half, self.heading_centre + half))
     }
 
     /// The warnings to print (empty when everything is excited).
@@ -152,7 +152,7 @@ impl Excitation {
         }
         for c in self.channels.iter().filter(|c| c.silent) {
             w.push(format!(
-                "{} carries no signal (σ {:.4} against σ {:.4} of {} and its bound {:.3}): its terms are left out, no delay is estimated for it",
+                "{} carries no signal (σ {:.4} against σ {:.4} of {} and its bound {:.3}): no delay is estimated for it, SINDy leaves its terms out and PD holds its gain at the unit static gain",
                 c.input, c.sd, c.commanded_sd, c.commanded, c.bound
             ));
         }

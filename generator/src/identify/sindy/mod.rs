@@ -230,8 +230,7 @@ impl SindyFit {
             &self.targets,
             &rows,
             &self.sweep,
-            &self.dropped_terms,
-            &self.excluded_terms,
+            (&self.dropped_terms, &self.excluded_terms),
         );
         self.file.coefficients = entries;
         self.coefficients = coefficients;
@@ -562,8 +561,7 @@ fn build_provenance(
     targets: &[String],
     rows: &[RowFit],
     sweep: &[SweepPoint],
-    dropped: &[String],
-    excluded: &[String],
+    (dropped, excluded): (&[String], &[String]),
 ) -> Value {
     let mut p = match user {
         Value::Object(m) => m,
