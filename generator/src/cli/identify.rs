@@ -351,10 +351,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     }
     // Everything rate-dependent is set in seconds and converted at the logs' sample period.
     let dt = sample_period(&logs).unwrap_or(1.0 / 30.0);
-    let savgol = check_savgol(
-        args.savgol_window
-            .unwrap_or_else(|| savgol_window(dt, args.savgol_order)),
-    )?;
+    let savgol = check_savgol(args.savgol_window.unwrap_or_else(|| savgol_window(dt)))?;
     // Directions the logs did not excite (docs/identification.md, "Unexcited directions").
     let excitation_options = ExcitationOptions::default();
     let ex = excitation::analyse(&logs, &excitation_options);
@@ -580,11 +577,12 @@ fn horizon_check_options(ex: &Excitation) -> HorizonCheck {
 }
 
 /// The default Savitzky-Golay window at sample period `dt`: the odd sample count nearest
-/// [`SAVGOL_WINDOW_S`] (at least order + 2).
-fn savgol_window(dt: f64, order: usize) -> usize {
+/// [`SAVGOL_WINDOW_S`], at least 5 (the smallest window of the default order 3). It is not widened
+/// for a higher --savgol-order: an order the window cannot carry is an error naming both flags.
+fn savgol_window(dt: f64) -> usize {
     let n = response::samples(SAVGOL_WINDOW_S, dt);
     let n = if n % 2 == 0 { n + 1 } else { n };
-    n.max((order + 2) | 1)
+    n.max(5)
 }
 
 /// The default Savitzky-Golay window, s (9 samples at 30 Hz).
