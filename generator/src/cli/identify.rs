@@ -124,7 +124,9 @@ pub struct IdentifyArgs {
     /// SINDy: criterion of the sweep (per row, effective sample count).
     #[arg(long, value_enum, default_value_t = CriterionArg::Bic)]
     criterion: CriterionArg,
-    /// Input delays: `auto` (default) estimates each channel's delay (0 … 0.5 s) and, where it
+    /// Input delays: `auto` (default) estimates each channel's delay (0 … 0.5 s; a best delay
+    /// within one sample of 0.5 s is refused with a warning, a channel that carries no signal is
+    /// not scanned: no delay) and, where it
     /// improves held-out free runs, a first-order lag (0.02 … 0.8 s) from the logs, then refines
     /// each delay by the refitted model's held-out free runs over one horizon (kept where both
     /// held-out ends improve by 5 %), and writes them as `corrections.latency` /
