@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use uavgen::evaluate::{evaluate, EvaluateOptions};
 use uavgen::identify::bounded_selection::select_bounded_with;
 use uavgen::identify::dataset::{build, DatasetOptions, Targets};
+use uavgen::identify::excitation::{self, Excitation, ExcitationOptions};
 use uavgen::identify::horizon_check::{self, HorizonCheck};
 use uavgen::identify::horizon_delay::{self, HeldOut, RefineOptions};
 use uavgen::identify::loop_refine;
@@ -81,9 +82,11 @@ pub struct IdentifyArgs {
     /// Overwrite --out if it exists.
     #[arg(long)]
     force: bool,
-    /// Savitzky-Golay window (odd) for derivatives.
-    #[arg(long, default_value_t = 9)]
-    savgol_window: usize,
+    /// Savitzky-Golay window (odd, samples) for derivatives. Default: the odd sample count nearest
+    /// 0.3 s at the logs' sample period (the slowest log's median; 9 at 30 Hz, 15 at 50 Hz, 31 at
+    /// 100 Hz).
+    #[arg(long)]
+    savgol_window: Option<usize>,
     /// Savitzky-Golay polynomial order.
     #[arg(long, default_value_t = 3)]
     savgol_order: usize,
@@ -121,7 +124,9 @@ pub struct IdentifyArgs {
     /// SINDy: criterion of the sweep (per row, effective sample count).
     #[arg(long, value_enum, default_value_t = CriterionArg::Bic)]
     criterion: CriterionArg,
-    /// Input delays: `auto` (default) estimates each channel's delay (0 … 0.5 s) and, where it
+    /// Input delays: `auto` (default) estimates each channel's delay (0 … 0.5 s; a best delay
+    /// within one sample of 0.5 s is refused with a warning, a channel that carries no signal is
+    /// not scanned: no delay) and, where it
     /// improves held-out free runs, a first-order lag (0.02 … 0.8 s) from the logs, then refines
     /// each delay by the refitted model's held-out free runs over one horizon (kept where both
     /// held-out ends improve by 5 %), and writes them as `corrections.latency` /
@@ -241,7 +246,11 @@ fn round_s(v: f64) -> f64 {
 /// Estimate the input response from the logs (`--input-delay auto`).
 /// The scan always works on the integral form (`h` = 0: no derivative window), whatever targets the
 /// fit uses (docs/sindy.md, "Targets").
-fn estimate_response(logs: &[uavgen::logs::FlightLog], savgol: SavGol) -> Result<response::ResponseEstimate, String> {
+fn estimate_response(
+    logs: &[uavgen::logs::FlightLog],
+    savgol: SavGol,
+    ex: &Excitation,
+) -> Result<response::ResponseEstimate, String> {
     let whole = build(
         logs,
         &DatasetOptions {
@@ -265,7 +274,12 @@ fn estimate_response(logs: &[uavgen::logs::FlightLog], savgol: SavGol) -> Result
             x_next: s.x_next,
         })
         .collect();
-    response::estimate(&segments, &ScanOptions::default()).map_err(|e| e.to_string())
+    let options = ScanOptions {
+        silent: ex.silent(),
+        excluded_vars: ex.excluded_vars(),
+        ..ScanOptions::default()
+    };
+    response::estimate(&segments, &options).map_err(|e| e.to_string())
 }
 
 pub fn run(args: IdentifyArgs) -> Result<(), String> {
@@ -275,8 +289,12 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         .clone()
         .or_else(|| args.out.file_stem().map(|s| s.to_string_lossy().into_owned()))
         .unwrap_or_else(|| "identified".into());
-    let savgol = SavGol::new(args.savgol_window, args.savgol_order)
-        .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
+    // An explicit window is checked before any work; the default needs the logs' rate.
+    let check_savgol =
+        |w: usize| SavGol::new(w, args.savgol_order).map_err(|e| format!("--savgol-window/--savgol-order: {e}"));
+    if let Some(w) = args.savgol_window {
+        check_savgol(w)?;
+    }
     let delay_spec = parse_delay_spec(&args.input_delay)?;
     // Every value is checked before any work (the PD options too, which are used last).
     if matches!(args.method, Method::Pd) {
@@ -333,6 +351,16 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             args.logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
         ));
     }
+    // Everything rate-dependent is set in seconds and converted at the logs' sample period.
+    let dt = sample_period(&logs).unwrap_or(1.0 / 30.0);
+    let savgol = check_savgol(args.savgol_window.unwrap_or_else(|| savgol_window(dt)))?;
+    // Directions the logs did not excite (docs/identification.md, "Unexcited directions").
+    let excitation_options = ExcitationOptions::default();
+    let ex = excitation::analyse(&logs, &excitation_options);
+    let mut warnings = ex.warnings();
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let targets = match (args.targets, &args.method) {
         (Some(TargetsArg::Integral), _) | (None, Method::Sindy) => Targets::Trapezoid,
         (Some(TargetsArg::Derivative), _) | (None, Method::Pd) => Targets::SavGol,
@@ -350,8 +378,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             eprintln!(
                 "estimating input delays and lags (--input-delay auto: delays 0..0.5 s, lags 0.02..0.8 s; held-out one-step error of the driven row, guarded by its loop's held-out free runs) ..."
             );
-            let est =
-                super::progress::with_spinner("estimating input delays and lags", || estimate_response(&logs, savgol))?;
+            let est = super::progress::with_spinner("estimating input delays and lags", || {
+                estimate_response(&logs, savgol, &ex)
+            })?;
             eprintln!(
                 "  held out: {} {}; per channel: delay (Δχ² = 1 range), lag, one-step and loop free-run RMSE before -> after",
                 est.folds, est.fold_kind
@@ -359,7 +388,18 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             for c in &est.channels {
                 eprintln!("  {}", c.line());
             }
-            let refined = refine_delays(&args, &logs, &est.response, savgol, targets);
+            for c in &est.channels {
+                if let Some(d) = c.refused_at_edge {
+                    let w = format!(
+                        "{}: the delay estimate {d:.3} s lies at the edge of the 0..{} s scan (the response may lie beyond it, or the data hold no minimum): refused, no delay",
+                        c.input,
+                        ScanOptions::default().max_delay
+                    );
+                    eprintln!("warning: {w}");
+                    warnings.push(w);
+                }
+            }
+            let refined = refine_delays(&args, &logs, &est.response, savgol, targets, &ex, dt);
             let response = refined.as_ref().map_or(est.response, |r| r.response);
             (Some(response), Some((est, refined)))
         }
@@ -379,7 +419,9 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
         "tool": format!("uavgen {} identify", env!("CARGO_PKG_VERSION")),
         "logs": files,
         "samples": dataset.len(),
-        "savitzky_golay": { "window": savgol.window, "order": savgol.order },
+        "savitzky_golay": { "window": savgol.window, "order": savgol.order, "window_s": savgol.window as f64 * dt },
+        "sample_period": dt,
+        "excitation": ex.to_json(&excitation_options),
         "stale": args.stale.name(),
         "input_delay": args.input_delay.trim(),
         "targets": match targets {
@@ -395,8 +437,8 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     let mut unrefined = None;
     let json = match args.method {
         Method::Sindy => {
-            let fitted = fit_sindy(&args, &dataset, logs.len(), &name, provenance, response)?;
-            match refine_loops(&args, &fitted, &dataset)? {
+            let fitted = fit_sindy(&args, &dataset, logs.len(), &name, provenance, response, &ex)?;
+            match refine_loops(&args, &fitted, &dataset, dt)? {
                 Some(texts) => {
                     unrefined = texts.fallback;
                     texts.chosen
@@ -405,7 +447,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
             }
         }
         Method::Pd => {
-            let options = pd_options(&args)?;
+            let options = pd_options(&args, &ex)?;
             eprintln!(
                 "fitting the PD model on {} samples from {} log(s) ...",
                 dataset.len(),
@@ -431,7 +473,13 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
                 .join(", ")
         );
     }
-    let json = checked(&json, unrefined.as_deref(), &args, response, envelope.as_ref())?;
+    let (mut json, chosen, model) = checked(&json, unrefined.as_deref(), &args, response, envelope.as_ref(), &ex)?;
+    // A commanded channel the model does not act on (docs/identification.md, "Zero gains").
+    warnings.extend(gain_warnings(&model, &ex));
+    if !warnings.is_empty() {
+        let with = add_warnings(&chosen, &args, &warnings)?;
+        json = finish(&with, &args, response, envelope.as_ref())?.0;
+    }
     super::write_atomically(&args.out, &json)?;
     println!("wrote {}", args.out.display());
     Ok(())
@@ -458,6 +506,8 @@ fn input_response_json(
                     "held_out_horizon_rmse": [c.horizon_rmse.0, c.horizon_rmse.1, c.horizon_rmse.2],
                     "evidence": c.evidence,
                     "note": c.note,
+                    "silent": c.silent,
+                    "refused_at_edge": c.refused_at_edge.map(round_s),
                 }),
             )
         })
@@ -482,16 +532,17 @@ fn checked(
     args: &IdentifyArgs,
     response: Option<InputResponse>,
     envelope: Option<&envelope::DeclaredEnvelope>,
-) -> Result<String, String> {
+    ex: &Excitation,
+) -> Result<(String, String, uavgen::model::Model), String> {
+    let mut chosen = json.to_string();
     let (mut json, mut model) = finish(json, args, response, envelope)?;
     if let Some(c) = model.corrections.as_ref() {
         for line in c.summary(&model.inputs) {
             eprintln!("  corrections: {}", line.trim());
         }
     }
-    let mut report = super::progress::with_spinner("horizon check", || {
-        horizon_check::check(&model, &HorizonCheck::default())
-    });
+    let check_options = horizon_check_options(ex);
+    let mut report = super::progress::with_spinner("horizon check", || horizon_check::check(&model, &check_options));
     if let (Some(r), Some(text)) = (&report, unrefined) {
         if !r.passed() {
             eprintln!(
@@ -499,7 +550,8 @@ fn checked(
                 r.unbounded, r.trials
             );
             (json, model) = finish(text, args, response, envelope)?;
-            report = horizon_check::check(&model, &HorizonCheck::default());
+            chosen = text.to_string();
+            report = horizon_check::check(&model, &check_options);
         }
     }
     if let Some(report) = report {
@@ -514,7 +566,72 @@ fn checked(
             ));
         }
     }
-    Ok(json)
+    Ok((json, chosen, model))
+}
+
+/// The horizon check of `identify`: the defaults, with the start yaw within the logged arc when
+/// the heading did not move (docs/identification.md, "Unexcited directions").
+fn horizon_check_options(ex: &Excitation) -> HorizonCheck {
+    HorizonCheck {
+        yaw: ex.heading_still.then(|| ex.yaw_range()).flatten(),
+        ..HorizonCheck::default()
+    }
+}
+
+/// The default Savitzky-Golay window at sample period `dt`: the odd sample count nearest
+/// [`SAVGOL_WINDOW_S`], at least 5 (the smallest window of the default order 3). It is not widened
+/// for a higher --savgol-order: an order the window cannot carry is an error naming both flags.
+fn savgol_window(dt: f64) -> usize {
+    let n = response::samples(SAVGOL_WINDOW_S, dt);
+    let n = if n % 2 == 0 { n + 1 } else { n };
+    n.max(5)
+}
+
+/// The default Savitzky-Golay window, s (9 samples at 30 Hz).
+const SAVGOL_WINDOW_S: f64 = 0.3;
+
+/// Warnings for the commanded channels the model does not act on: a static gain below
+/// [`excitation::ZERO_GAIN`] (docs/identification.md, "Zero gains"). A silent channel whose terms
+/// were left out is said so.
+fn gain_warnings(model: &uavgen::model::Model, ex: &Excitation) -> Vec<String> {
+    let Some(gains) = excitation::channel_gains(model) else {
+        return Vec::new();
+    };
+    let silent = ex.silent();
+    let mut out = Vec::new();
+    for (input, g) in excitation::zero_gains(&gains, [true; 4]) {
+        let j = INPUTS.iter().position(|n| *n == input).unwrap_or(0);
+        let w = if silent[j] {
+            format!("{input}: the model does not act on it (static gain {g:.3}): the logs carry no signal on this channel, so the model cannot predict its effect")
+        } else {
+            format!("{input}: the identified static gain is ~0 ({g:.3}, below {}): the model ignores a command the logs carry", excitation::ZERO_GAIN)
+        };
+        eprintln!("warning: {w}");
+        out.push(w);
+    }
+    out
+}
+
+/// The fit's text (before corrections and envelope) with `provenance.warnings`.
+fn add_warnings(text: &str, args: &IdentifyArgs, warnings: &[String]) -> Result<String, String> {
+    fn put(p: &mut serde_json::Value, warnings: &[String]) {
+        if let serde_json::Value::Object(m) = p {
+            m.insert("warnings".into(), serde_json::json!(warnings));
+        }
+    }
+    match args.method {
+        Method::Sindy => {
+            let mut f: uavgen::model::SindyFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
+            put(&mut f.provenance, warnings);
+            serde_json::to_string_pretty(&f).map_err(|e| e.to_string())
+        }
+        Method::Pd => {
+            let mut f: uavgen::model::PdFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
+            put(&mut f.provenance, warnings);
+            serde_json::to_string_pretty(&f).map_err(|e| e.to_string())
+        }
+    }
+    .map(|t| t + "\n")
 }
 
 /// The model text as it will be written (corrections and envelope attached) and what `--model`
@@ -549,6 +666,7 @@ fn refine_loops(
     args: &IdentifyArgs,
     fitted: &str,
     dataset: &uavgen::identify::dataset::Dataset,
+    dt: f64,
 ) -> Result<Option<RefinedTexts>, String> {
     if args.refine_loops == RefineLoopsArg::None {
         return Ok(None);
@@ -559,7 +677,7 @@ fn refine_loops(
     }
     let sparse: uavgen::model::SindyFile = serde_json::from_str(fitted).map_err(|e| e.to_string())?;
     let mut file = sparse.clone();
-    let options = loop_refine::RefineOptions::default();
+    let options = loop_refine::RefineOptions::for_period(dt);
     eprintln!(
         "refining the loops by simulation error (--refine-loops auto: free runs of {} samples every {} samples, at most {} runs, held out by log; kept at a {:.0} % held-out gain) ...",
         options.horizon,
@@ -591,6 +709,8 @@ fn refine_loops(
     let record = serde_json::json!({
         "horizon": options.horizon,
         "stride": options.stride,
+        "horizon_s": loop_refine::HORIZON_S,
+        "stride_s": loop_refine::STRIDE_S,
         "max_windows": options.max_windows,
         "min_gain": options.min_gain,
         "loops": loops,
@@ -632,10 +752,11 @@ fn constant_log(log: &uavgen::logs::FlightLog) -> bool {
 const RIDGE_LADDER: [f64; 3] = [1e-3, 1e-2, 1e-1];
 
 /// The PD fit's options of `args`.
-fn pd_options(args: &IdentifyArgs) -> Result<PdFitOptions, String> {
+fn pd_options(args: &IdentifyArgs, ex: &Excitation) -> Result<PdFitOptions, String> {
     check_positive("mass", args.mass)?;
     let mut options = PdFitOptions {
         mass: args.mass,
+        unit_gain: ex.silent(),
         ..PdFitOptions::default()
     };
     if let Some(lambda) = args.lowpass {
@@ -656,22 +777,28 @@ fn refine_delays(
     start: &InputResponse,
     savgol: SavGol,
     targets: Targets,
+    ex: &Excitation,
+    dt: f64,
 ) -> Option<horizon_delay::Refinement> {
-    let options = RefineOptions::default();
+    let options = RefineOptions {
+        fixed: ex.silent(),
+        ..RefineOptions::default()
+    };
+    let min_rows = options.min_rows(dt);
     let splits: Vec<_> = [HeldOut::Tail, HeldOut::Head]
         .into_iter()
-        .map(|end| horizon_delay::split_logs(logs, options.train_share, options.min_rows, end))
+        .map(|end| horizon_delay::split_logs(logs, options.train_share, min_rows, end))
         .collect();
     if splits.iter().any(|(_, test)| test.is_empty()) {
         eprintln!(
-            "  delays not refined over the horizon: no segment is long enough to hold out {:.0} % of it ({} rows; the one-step delays are kept)",
+            "  delays not refined over the horizon: no segment is long enough to hold out {:.0} % of it ({} s; the one-step delays are kept)",
             100.0 * (1.0 - options.train_share),
-            options.min_rows
+            options.min_part
         );
         return None;
     }
-    let dt = median_period(logs)?;
     let evaluate_options = EvaluateOptions {
+        horizon: response::samples(REFINE_HORIZON_S, dt),
         dataset: DatasetOptions {
             savgol,
             ..DatasetOptions::default()
@@ -681,7 +808,7 @@ fn refine_delays(
     };
     // Per split: the held-out horizon RMSE of the model refitted with `r`.
     let split_rmse = |r: &InputResponse, (train, test): &(Vec<_>, Vec<_>)| -> Option<f64> {
-        let model = candidate_model(args, train, r, savgol, targets)?;
+        let model = candidate_model(args, train, r, savgol, targets, ex)?;
         let e = evaluate(&model, test, &evaluate_options).ok()?;
         // A candidate whose free runs diverge is not a better model, whatever its finite runs say.
         (e.horizon.diverged == 0).then_some(e.horizon.metrics?.overall_rmse)
@@ -726,6 +853,18 @@ fn refine_delays(
     refined
 }
 
+/// The free runs of the delay refinement, s (one MPC horizon).
+const REFINE_HORIZON_S: f64 = 1.0;
+
+/// The sample period at which `identify` converts its durations to samples: the slowest log's
+/// (the largest of the logs' median periods). With logs of one rate that is their period; the
+/// M100's runs at 0.030 s and 0.0333 s give 0.0333 s (30 Hz).
+fn sample_period(logs: &[uavgen::logs::FlightLog]) -> Option<f64> {
+    logs.iter()
+        .filter_map(|l| median_period(std::slice::from_ref(l)))
+        .reduce(f64::max)
+}
+
 /// The median sample period over every segment of `logs`.
 fn median_period(logs: &[uavgen::logs::FlightLog]) -> Option<f64> {
     let steps: Vec<f64> = logs
@@ -745,6 +884,7 @@ fn candidate_model(
     r: &InputResponse,
     savgol: SavGol,
     targets: Targets,
+    ex: &Excitation,
 ) -> Option<uavgen::model::Model> {
     let dataset = build(
         logs,
@@ -759,13 +899,19 @@ fn candidate_model(
     let file = match args.method {
         Method::Sindy => {
             let alpha = args.alpha.unwrap_or(RIDGE_LADDER[0]);
-            let options = sindy_options(args, alpha, sindy_sweep(args));
+            let options = sindy_options(args, alpha, sindy_sweep(args), ex);
             let fit = sindy::fit_with_progress(&dataset, &options, "candidate", serde_json::json!({}), &mut |_, _| {})
                 .ok()?;
             serde_json::to_string(&fit.file).ok()?
         }
         Method::Pd => {
-            let fit = pd::fit(&dataset, &pd_options(args).ok()?, "candidate", serde_json::json!({})).ok()?;
+            let fit = pd::fit(
+                &dataset,
+                &pd_options(args, ex).ok()?,
+                "candidate",
+                serde_json::json!({}),
+            )
+            .ok()?;
             serde_json::to_string(&fit.file).ok()?
         }
     };
@@ -809,7 +955,7 @@ fn sindy_sweep(args: &IdentifyArgs) -> Option<Vec<f64>> {
 }
 
 /// The SINDy options of `args` with ridge weight `alpha`.
-fn sindy_options(args: &IdentifyArgs, alpha: f64, sweep: Option<Vec<f64>>) -> SindyOptions {
+fn sindy_options(args: &IdentifyArgs, alpha: f64, sweep: Option<Vec<f64>>, ex: &Excitation) -> SindyOptions {
     let threshold = args.threshold.unwrap_or(0.05);
     let optimizer = match args.optimizer {
         OptimizerArg::Stlsq => Optimizer::Stlsq {
@@ -838,6 +984,7 @@ fn sindy_options(args: &IdentifyArgs, alpha: f64, sweep: Option<Vec<f64>>) -> Si
         } else {
             FittedRows::Dynamic
         },
+        excluded_vars: ex.excluded_vars(),
         ..SindyOptions::default()
     }
 }
@@ -853,6 +1000,7 @@ fn fit_sindy(
     name: &str,
     provenance: serde_json::Value,
     response: Option<InputResponse>,
+    ex: &Excitation,
 ) -> Result<String, String> {
     let sweep = sindy_sweep(args);
     let ladder: Vec<f64> = match (args.alpha, args.optimizer) {
@@ -864,7 +1012,7 @@ fn fit_sindy(
     // The fit kept: the first rung that passes, else the one with the fewest unbounded trials.
     let mut fit: Option<(usize, f64, sindy::SindyFit)> = None;
     for (rung, &alpha) in ladder.iter().enumerate() {
-        let options = sindy_options(args, alpha, sweep.clone());
+        let options = sindy_options(args, alpha, sweep.clone(), ex);
         let bar = super::progress::bar(options.sweep.as_ref().map_or(1, Vec::len), "sparsity values");
         let mut f = sindy::fit_with_progress(dataset, &options, name, provenance.clone(), &mut |done, _| {
             bar.set_position(done as u64)
@@ -873,7 +1021,7 @@ fn fit_sindy(
         bar.finish_and_clear();
         let mut unbounded = 0;
         if options.sweep.is_some() && !args.no_horizon_check {
-            let check = HorizonCheck::default();
+            let check = horizon_check_options(ex);
             let with = |fit: &sindy::SindyFit| attach(&fit.to_json(), args, response);
             let selection = super::progress::with_spinner(&format!("horizon check (ridge α = {alpha})"), || {
                 select_bounded_corrected(&mut f, &check, &with)

@@ -21,11 +21,15 @@ pub struct HorizonCheck {
     pub horizon: usize,
     pub dt: f64,
     /// Start states: |roll|, |pitch| ≤ tilt (rad), |v| ≤ speed (m/s), |Euler rates| ≤ rate (rad/s),
-    /// yaw anywhere; inputs uniform in ±`inputs`, half of the trials at a saturated corner.
+    /// yaw within `yaw` (anywhere when `None`); inputs uniform in ±`inputs`, half of the trials at
+    /// a saturated corner.
     pub tilt: f64,
     pub speed: f64,
     pub rate: f64,
     pub inputs: [f64; 4],
+    /// The start yaw range (rad): what the logs support when their heading did not move
+    /// ([`super::excitation::Excitation::yaw_range`]); `None`: the whole circle.
+    pub yaw: Option<(f64, f64)>,
     /// A prediction is unbounded if |v| ≥ max_speed, |roll| or |pitch| ≥ max_tilt, or an Euler rate
     /// ≥ max_rate, or anything is not finite.
     pub max_speed: f64,
@@ -36,7 +40,7 @@ pub struct HorizonCheck {
 
 impl Default for HorizonCheck {
     /// 256 trials of 30 samples at 30 Hz (the paper's MPC horizon), the MPC's input bounds; start
-    /// states within tilt 0.5 rad, speed 4 m/s, rates 1 rad/s; bounds |v| < 30 m/s, tilt < 1.5 rad,
+    /// states within tilt 0.5 rad, speed 4 m/s, rates 1 rad/s, any yaw; bounds |v| < 30 m/s, tilt < 1.5 rad,
     /// rates < 15 rad/s (a model without any attitude dynamics, whose rates stay at their start
     /// values, stays inside them for one second).
     fn default() -> Self {
@@ -49,6 +53,7 @@ impl Default for HorizonCheck {
             speed: 4.0,
             rate: 1.0,
             inputs: envelope.inputs,
+            yaw: None,
             max_speed: 30.0,
             max_tilt: 1.5,
             max_rate: 15.0,
@@ -140,7 +145,11 @@ pub fn check(model: &Model, options: &HorizonCheck) -> Option<HorizonReport> {
             for i in 3..5 {
                 x0[i] = uniform(options.tilt);
             }
-            x0[5] = uniform(std::f64::consts::PI);
+            // One draw either way (the same random sequence with or without a yaw range).
+            x0[5] = match options.yaw {
+                Some((lo, hi)) => 0.5 * (lo + hi) + uniform(0.5 * (hi - lo).abs()),
+                None => uniform(std::f64::consts::PI),
+            };
             for i in 6..9 {
                 x0[i] = uniform(options.speed);
             }
@@ -224,6 +233,37 @@ mod tests {
         let r = check(&model(&sindy("")), &HorizonCheck::default()).unwrap();
         assert!(r.passed(), "{}", r.summary());
         assert_eq!(r.trials, 257);
+    }
+
+    /// A heading term that is harmless near the logged heading and explodes away from it: the
+    /// check over the whole circle catches it, the check within the logged yaw range does not.
+    #[test]
+    fn a_yaw_range_keeps_the_starts_within_the_logged_heading() {
+        // roll_rate' = (7 − 10 cos(yaw)) roll_rate + …: damped (−3) near yaw 0, +17 at ±π. The yaw
+        // rate is damped fast and its input barely acts, so yaw stays within 0.05 rad of its start.
+        let json = sindy(r#"{"state":"roll_rate","term":"roll_rate*cos(yaw)","coefficient":-10.0}"#)
+            .replace(r#""library":["#, r#""library":["roll_rate*cos(yaw)","#)
+            .replace(
+                r#"{"state":"roll_rate","term":"roll_rate","coefficient":-3.0}"#,
+                r#"{"state":"roll_rate","term":"roll_rate","coefficient":7.0}"#,
+            )
+            .replace(
+                r#"{"state":"yaw_rate","term":"u_yaw_rate","coefficient":2.0}"#,
+                r#"{"state":"yaw_rate","term":"u_yaw_rate","coefficient":0.01}"#,
+            )
+            .replace(
+                r#"{"state":"yaw_rate","term":"yaw_rate","coefficient":-2.0}"#,
+                r#"{"state":"yaw_rate","term":"yaw_rate","coefficient":-20.0}"#,
+            );
+        let m = model(&json);
+        let whole = check(&m, &HorizonCheck::default()).unwrap();
+        assert!(!whole.passed(), "{}", whole.summary());
+        let near = HorizonCheck {
+            yaw: Some((-0.2, 0.2)),
+            ..HorizonCheck::default()
+        };
+        let r = check(&m, &near).unwrap();
+        assert!(r.passed(), "{}", r.summary());
     }
 
     #[test]

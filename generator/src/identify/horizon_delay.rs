@@ -11,8 +11,10 @@
 //!
 //! - the logs are split twice ([`split_logs`]): every segment's first [`RefineOptions::train_share`]
 //!   fitted and the rest held out, and its last share fitted and the first part held out;
-//! - per channel (in LOG_FORMAT.md order, once), the candidates are the one-step delay d₁ and
-//!   d₁ + k Δt/2 for k = −`below` … `above` (within 0 … `max_delay`), its lag kept; each candidate
+//! - per channel (in LOG_FORMAT.md order, once; not a channel in [`RefineOptions::fixed`], e.g.
+//!   one that carries no signal), the candidates are the one-step delay d₁ and d₁ + k `step`
+//!   for k = −`below` … `above` (within 0 … `max_delay`, less the top sample period: a delay at
+//!   the scan's edge is refused, as in the one-step scan), its lag kept; each candidate
 //!   is scored by the caller: per split, the model refitted on the training part with that
 //!   response and its held-out free runs over one MPC horizon (overall RMSE, [`crate::evaluate`]'s
 //!   figure) relative to the one-step response's; the score is the worse split's ratio, so a
@@ -22,43 +24,57 @@
 //!   bad (docs/identification.md);
 //! - the best candidate replaces the current delay only when it improves the score by at least
 //!   `min_gain` (relative): without clear evidence the one-step answer stays. A best candidate at
-//!   an edge of the grid is followed on in half samples while the score keeps improving.
+//!   an edge of the grid is followed on in `step`s while the score keeps improving.
 //!
 //! The search is generic over the score so that it is tested on its own (a hand-made score
 //! surface) and the CLI supplies the fit (SINDy or PD) it is identifying.
 
-use super::response::{InputResponse, INPUTS};
+use super::response::{at_edge, InputResponse, INPUTS};
 use crate::logs::{FlightLog, Segment};
 
 /// The search's grid and rule (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RefineOptions {
-    /// Half-sample steps below the one-step delay.
+    /// The grid's step, s.
+    pub step: f64,
+    /// Steps below the one-step delay.
     pub below: usize,
-    /// Half-sample steps above it.
+    /// Steps above it.
     pub above: usize,
-    /// Largest delay tried, s (the one-step scan's range).
+    /// Largest delay scanned, s (the one-step scan's range); candidates within one sample period
+    /// of it are at the edge and not tried.
     pub max_delay: f64,
     /// Relative improvement of the held-out score a new delay must bring.
     pub min_gain: f64,
     /// Share of every segment fitted; the rest is held out.
     pub train_share: f64,
-    /// Rows each part of a split segment needs (else the segment is fitted whole).
-    pub min_rows: usize,
+    /// Duration each part of a split segment needs, s (else the segment is fitted whole).
+    pub min_part: f64,
+    /// Channels left at their one-step delay (no evidence to refine them: silent channels).
+    pub fixed: [bool; 4],
 }
 
 impl Default for RefineOptions {
-    /// One sample below to two above in half samples, 0 … 0.5 s, a 5 % gain, 80 % fitted, parts
-    /// of at least 90 rows (3 s at 30 Hz: three horizons).
+    /// Steps of 1/60 s (half a sample at 30 Hz), 1/30 s below to 1/15 s above, 0 … 0.5 s, a 5 %
+    /// gain, 80 % fitted, parts of at least 3 s (three horizons), every channel refined.
     fn default() -> Self {
         Self {
+            step: 1.0 / 60.0,
             below: 2,
             above: 4,
             max_delay: 0.5,
             min_gain: 0.05,
             train_share: 0.8,
-            min_rows: 90,
+            min_part: 3.0,
+            fixed: [false; 4],
         }
+    }
+}
+
+impl RefineOptions {
+    /// [`Self::min_part`] in rows of period `dt`.
+    pub fn min_rows(&self, dt: f64) -> usize {
+        super::response::samples(self.min_part, dt)
     }
 }
 
@@ -84,12 +100,13 @@ pub struct Refinement {
     pub channels: Vec<ChannelRefinement>,
 }
 
-/// The candidate delays of one channel around `d1` (sorted, distinct, within 0 … max_delay).
+/// The candidate delays of one channel around `d1` (sorted, distinct, within 0 … max_delay, none
+/// at the edge: within the sample period `dt` of max_delay).
 pub fn candidates(d1: f64, dt: f64, options: &RefineOptions) -> Vec<f64> {
     // Below 0 the grid is clipped to 0 (kept once by the dedup).
     let mut out: Vec<f64> = (-(options.below as i64)..=options.above as i64)
-        .map(|k| (d1 + k as f64 * dt / 2.0).max(0.0))
-        .filter(|d| *d <= options.max_delay + 1e-12)
+        .map(|k| (d1 + k as f64 * options.step).max(0.0))
+        .filter(|d| *d <= options.max_delay + 1e-12 && !at_edge(*d, options.max_delay, dt))
         .collect();
     out.sort_by(f64::total_cmp);
     out.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
@@ -110,6 +127,15 @@ pub fn refine(
     let mut channels = Vec::with_capacity(4);
     for (j, input) in INPUTS.iter().enumerate() {
         let d1 = current.delay[j];
+        if options.fixed[j] {
+            channels.push(ChannelRefinement {
+                input,
+                one_step: d1,
+                delay: d1,
+                scores: Vec::new(),
+            });
+            continue;
+        }
         let mut scores = Vec::new();
         let mut choice = (d1, best);
         let mut try_delay = |d: f64| {
@@ -131,13 +157,13 @@ pub fn refine(
             }
         }
         // The best at an edge of the grid: walk on in half samples while the score improves.
-        for (edge, step) in [(grid.first(), -dt / 2.0), (grid.last(), dt / 2.0)] {
+        for (edge, step) in [(grid.first(), -options.step), (grid.last(), options.step)] {
             if edge.map_or(true, |e| (e - choice.0).abs() > 1e-12) {
                 continue;
             }
             loop {
                 let d = choice.0 + step;
-                if d < -1e-12 || d > options.max_delay + 1e-12 {
+                if d < -1e-12 || d > options.max_delay + 1e-12 || at_edge(d, options.max_delay, dt) {
                     break;
                 }
                 let s = try_delay(d.max(0.0));
@@ -328,6 +354,36 @@ mod tests {
             .channels
             .iter()
             .all(|c| c.scores.iter().skip(1).all(|s| s.1.is_infinite())));
+    }
+
+    /// The scan's edge (the top sample period of 0 … max_delay) is never tried, even when the
+    /// score keeps improving towards it; a fixed (silent) channel keeps its delay untried.
+    #[test]
+    fn the_edge_of_the_scan_is_refused_and_fixed_channels_stay() {
+        let o = RefineOptions::default();
+        let c = candidates(0.45, DT, &o);
+        assert!(!c.is_empty() && c.iter().all(|d| *d < 0.5 - DT + 1e-9), "{c:?}");
+        let start = InputResponse {
+            delay: [0.4, 0.0, 0.0, 0.0],
+            lag: [None; 4],
+        };
+        let mut score =
+            |r: &InputResponse| Some(1.0 + 100.0 * (r.delay[0] - 0.7).powi(2) + 100.0 * (r.delay[3] - 0.1).powi(2));
+        let fixed = RefineOptions {
+            fixed: [false, false, false, true],
+            ..o
+        };
+        let r = refine(&start, DT, &fixed, &mut score).unwrap();
+        assert!(
+            r.response.delay[0] > 0.4 && r.response.delay[0] < 0.5 - DT + 1e-9,
+            "{:?}",
+            r.response
+        );
+        assert!(r.channels[0].scores.iter().all(|(d, _)| *d < 0.5 - DT + 1e-9));
+        assert_eq!(r.response.delay[3], 0.0);
+        assert!(r.channels[3].scores.is_empty());
+        assert_eq!(RefineOptions::default().min_rows(DT), 90);
+        assert_eq!(RefineOptions::default().min_rows(0.01), 300);
     }
 
     #[test]

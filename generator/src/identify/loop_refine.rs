@@ -85,9 +85,26 @@ pub struct RefineOptions {
     pub blocks: usize,
 }
 
+/// One free run of the refinement, s (the MPC horizon).
+pub const HORIZON_S: f64 = 1.0;
+/// Time between window starts, s.
+pub const STRIDE_S: f64 = 0.1;
+
+impl RefineOptions {
+    /// The default options for logs sampled every `dt` s: free runs of [`HORIZON_S`] every
+    /// [`STRIDE_S`] in samples of `dt` (30 and 3 at 30 Hz, 100 and 10 at 100 Hz).
+    pub fn for_period(dt: f64) -> Self {
+        Self {
+            horizon: super::response::samples(HORIZON_S, dt),
+            stride: super::response::samples(STRIDE_S, dt),
+            ..Self::default()
+        }
+    }
+}
+
 impl Default for RefineOptions {
     /// One 30-sample horizon every 3rd sample (at most 2000 windows), 40 iterations, kept at a 5 %
-    /// held-out gain, 5 blocks.
+    /// held-out gain, 5 blocks: [`RefineOptions::for_period`] at 30 Hz.
     fn default() -> Self {
         Self {
             horizon: 30,

@@ -1,5 +1,6 @@
 pub mod bounded_selection;
 pub mod dataset;
+pub mod excitation;
 pub mod horizon_check;
 pub mod horizon_delay;
 pub mod loop_refine;

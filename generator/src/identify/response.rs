@@ -20,11 +20,15 @@
 //! others at their current estimate) with a second pass; held-out folds are the logs when there are
 //! 3 or more, else 5 contiguous blocks of every segment:
 //!
-//! 1. *Delay*: 0 … `max_delay` in steps of `delay_step` samples. Every candidate refits the row on
+//! 0. A channel that carries no signal ([`ScanOptions::silent`], [`super::excitation`]) is not
+//!    scanned: no delay, no lag, and a note.
+//! 1. *Delay*: 0 … `max_delay` in steps of `delay_step` seconds. Every candidate refits the row on
 //!    the whole physics library (least squares) on all folds but one and scores the one-step squared
 //!    error on the held-out fold. The least held-out error wins when its evidence over no delay,
 //!    N_eff ln(SSE₀/SSE), is at least `min_evidence` (N_eff: the effective sample count of the
-//!    row's residual); ±1σ: the delays with N_eff ln(SSE/SSE_min) ≤ 1.
+//!    row's residual); ±1σ: the delays with N_eff ln(SSE/SSE_min) ≤ 1. A best delay within one
+//!    sample period of `max_delay` (the scan's edge) is refused: the response may lie beyond the
+//!    scan, or the error surface has no minimum in it; the channel gets no delay and a note.
 //! 2. *Guard*: the channel's loop — the row (with its angle for roll and pitch) as a linear model in
 //!    1, the eight invariant states and the four inputs, refitted per fold — runs freely over one
 //!    MPC horizon on the held-out folds, the other states from the log. A delay that makes these
@@ -34,6 +38,7 @@
 //!    improve by ≥ `lag_gain` (and the delay did not make them worse: the loop model is trusted).
 
 use super::sindy::{eval_term, Library, LibraryKind};
+use crate::model::Base;
 use crate::model::{DEFAULT_INPUTS, DEFAULT_STATES};
 use nalgebra::{DMatrix, DVector};
 
@@ -116,9 +121,10 @@ pub fn interval_average(u: &[f64], dt: f64, delay: f64, lag: Option<f64>) -> Vec
 /// The scan's grid and rules (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScanOptions {
-    /// Largest delay scanned, s.
+    /// Largest delay scanned, s. A best delay within one sample period of it is at the scan's edge:
+    /// refused (no delay, a note), since the response may lie beyond the scan.
     pub max_delay: f64,
-    /// Delay step in samples.
+    /// Delay step, s.
     pub delay_step: f64,
     /// Lag time constants scanned, s.
     pub lags: Vec<f64>,
@@ -126,32 +132,41 @@ pub struct ScanOptions {
     pub blocks: usize,
     /// Coordinate-wise passes over the channels.
     pub passes: usize,
-    /// Samples of one free run (the MPC horizon) and the stride between their starts.
-    pub horizon: usize,
-    pub stride: usize,
+    /// One free run (the MPC horizon) and the stride between their starts, s (converted to
+    /// samples of each segment's period, at least 1).
+    pub horizon: f64,
+    pub stride: f64,
     /// Evidence N_eff ln(SSE₀/SSE) a channel's response must have over "no delay, no lag".
     pub min_evidence: f64,
     /// Relative improvement of the held-out loop free runs a lag must bring to be kept.
     pub lag_gain: f64,
+    /// Channels without excitation ([`super::excitation`]): not scanned, no delay and no lag.
+    pub silent: [bool; 4],
+    /// Variables (16 states-then-inputs index) whose library terms the scan's regression leaves
+    /// out (a still heading's yaw, a silent input).
+    pub excluded_vars: Vec<usize>,
 }
 
 impl Default for ScanOptions {
-    /// Delays 0 … 0.5 s in quarter samples; lags 0.02 … 0.8 s (14 log-spaced values); 5 blocks;
-    /// 2 passes; free runs of 30 samples every 2nd sample; evidence 4 (two standard errors); a lag
-    /// must improve the loop's held-out free runs by 2 %.
+    /// Delays 0 … 0.5 s in steps of 1/120 s (a quarter sample at 30 Hz); lags 0.02 … 0.8 s (14
+    /// log-spaced values); 5 blocks; 2 passes; free runs of 1 s every 1/15 s; evidence 4 (two
+    /// standard errors); a lag must improve the loop's held-out free runs by 2 %; every channel
+    /// scanned, the whole library.
     fn default() -> Self {
         let (lo, hi, count) = (0.02f64, 0.8f64, 14);
         let r = (hi / lo).ln() / (count - 1) as f64;
         Self {
             max_delay: 0.5,
-            delay_step: 0.25,
+            delay_step: 1.0 / 120.0,
             lags: (0..count).map(|i| lo * (r * i as f64).exp()).collect(),
             blocks: 5,
             passes: 2,
-            horizon: 30,
-            stride: 2,
+            horizon: 1.0,
+            stride: 1.0 / 15.0,
             min_evidence: 4.0,
             lag_gain: 0.02,
+            silent: [false; 4],
+            excluded_vars: Vec::new(),
         }
     }
 }
@@ -235,11 +250,18 @@ pub struct ChannelEstimate {
     pub evidence: f64,
     /// Why the lag or the response was not kept, if so.
     pub note: Option<String>,
+    /// The channel carried no signal ([`ScanOptions::silent`]): not scanned.
+    pub silent: bool,
+    /// The best delay, refused because it lay at the scan's edge.
+    pub refused_at_edge: Option<f64>,
 }
 
 impl ChannelEstimate {
     /// One line for the command's output.
     pub fn line(&self) -> String {
+        if self.silent {
+            return format!("{:<10} {SILENT_NOTE}", self.input);
+        }
         let mut s = format!(
             "{:<10} delay {:.3} s (±1σ {:.3}..{:.3})",
             self.input, self.delay, self.delay_range.0, self.delay_range.1
@@ -438,15 +460,16 @@ impl Scanner<'_> {
         let row = DRIVEN_ROW[j];
         let g = self.grams(r, row);
         let thetas: Vec<DVector<f64>> = (0..self.folded.folds).map(|f| g.solve(Some(f))).collect();
-        let h = self.options.horizon;
         let (mut sum, mut count) = (0.0, 0usize);
         for (s, rows) in self.segments.iter().zip(&self.folded.rows) {
+            let h = samples(self.options.horizon, s.dt);
+            let stride = samples(self.options.stride, s.dt);
             if rows.len() <= h {
                 continue;
             }
             let u = r.interval_inputs(&s.u, s.dt);
             let last = rows[rows.len() - 1].0;
-            for &(k0, f) in rows.iter().step_by(self.options.stride.max(1)) {
+            for &(k0, f) in rows.iter().step_by(stride) {
                 if k0 + h > last {
                     break;
                 }
@@ -497,16 +520,29 @@ struct LibraryScan {
 }
 
 impl LibraryScan {
-    fn new() -> Self {
+    fn new(excluded: &[usize]) -> Self {
         let vars: Vec<String> = DEFAULT_STATES
             .iter()
             .chain(DEFAULT_INPUTS.iter())
             .map(|s| s.to_string())
             .collect();
-        let library = Library::new(LibraryKind::Physics.terms(), &vars).unwrap_or_else(|_| Library {
+        let mut library = Library::new(LibraryKind::Physics.terms(), &vars).unwrap_or_else(|_| Library {
             names: Vec::new(),
             terms: Vec::new(),
         });
+        let keep: Vec<bool> = library
+            .terms
+            .iter()
+            .map(|t| {
+                !t.factors.iter().any(|(b, _)| match b {
+                    Base::Var(v) | Base::Sin(v) | Base::Cos(v) => excluded.contains(v),
+                })
+            })
+            .collect();
+        let mut k = keep.iter();
+        library.names.retain(|_| *k.next().unwrap_or(&true));
+        let mut k = keep.iter();
+        library.terms.retain(|_| *k.next().unwrap_or(&true));
         Self { library }
     }
 
@@ -638,6 +674,42 @@ fn effective_count(residuals: &[Vec<f64>]) -> f64 {
     n as f64 / tau
 }
 
+/// Seconds as a count of samples of period `dt` (rounded, at least 1).
+pub fn samples(seconds: f64, dt: f64) -> usize {
+    if dt > 0.0 && seconds.is_finite() {
+        ((seconds / dt).round() as usize).max(1)
+    } else {
+        1
+    }
+}
+
+/// Is `d` within one sample period of the scan's top `max_delay` (the edge)?
+pub fn at_edge(d: f64, max_delay: f64, dt: f64) -> bool {
+    d > 0.0 && d >= max_delay - dt + 1e-9
+}
+
+/// The note of a silent channel.
+pub const SILENT_NOTE: &str = "no excitation: the channel carries no signal, no delay estimated";
+
+fn silent_channel(j: usize) -> ChannelEstimate {
+    ChannelEstimate {
+        input: INPUTS[j],
+        row: STATE_NAMES[DRIVEN_ROW[j]],
+        delay: 0.0,
+        delay_range: (0.0, 0.0),
+        lag: None,
+        lag_range: None,
+        best_with_lag: None,
+        one_step_rmse: (f64::NAN, f64::NAN),
+        horizon_rmse: (f64::NAN, f64::NAN, None),
+        n_eff: 0.0,
+        evidence: 0.0,
+        note: Some(SILENT_NOTE.into()),
+        silent: true,
+        refused_at_edge: None,
+    }
+}
+
 /// Estimate every channel's delay and lag (see the module documentation).
 pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<ResponseEstimate, ResponseError> {
     let (folded, warmup) = fold_rows(segments, options);
@@ -646,7 +718,7 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
         folded,
         options,
     };
-    let lib = LibraryScan::new();
+    let lib = LibraryScan::new(&options.excluded_vars);
     let needed = 4 * (lib.library.len() + 1);
     if sc.usable() < needed || lib.library.is_empty() {
         return Err(ResponseError::TooShort {
@@ -660,7 +732,7 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
         d.sort_by(f64::total_cmp);
         d[d.len() / 2]
     };
-    let step = options.delay_step * dt;
+    let step = options.delay_step.max(1e-6);
     let steps = (options.max_delay / step).round() as usize;
     let delays: Vec<f64> = (0..=steps).map(|i| i as f64 * step).collect();
     let n_rows = sc.usable() as f64;
@@ -670,6 +742,10 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
     for _pass in 0..options.passes.max(1) {
         for j in 0..4 {
             let row = DRIVEN_ROW[j];
+            if options.silent[j] {
+                channels[j] = Some(silent_channel(j));
+                continue;
+            }
             let score =
                 |d: f64, l: Option<f64>| LibraryScan::cv_sse(&lib.grams(&sc, &with_channel(&cur, j, d, l), row));
             // Delays without a lag.
@@ -683,12 +759,21 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
             let n_eff = lib.n_eff(&sc, &with_channel(&cur, j, d_best, None), row);
             let evidence = n_eff * (sse0 / sse_best).ln();
             let mut note = None;
+            let mut refused = None;
             let (mut delay, mut sse_chosen) = (d_best, sse_best);
             if evidence < options.min_evidence {
                 note = Some(format!(
                     "no delay supported: evidence {evidence:.1} < {:.1}",
                     options.min_evidence
                 ));
+                delay = 0.0;
+                sse_chosen = sse0;
+            } else if at_edge(d_best, options.max_delay, dt) {
+                note = Some(format!(
+                    "delay {d_best:.3} s at the edge of the 0..{:.3} s scan: refused, no delay",
+                    options.max_delay
+                ));
+                refused = Some(d_best);
                 delay = 0.0;
                 sse_chosen = sse0;
             }
@@ -781,6 +866,8 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
                 n_eff,
                 evidence: n_eff * (sse0 / sse_chosen).ln(),
                 note,
+                silent: false,
+                refused_at_edge: refused,
             });
         }
     }
@@ -939,6 +1026,30 @@ mod tests {
             y.line()
         );
         assert!(est.channels[1].delay <= 0.25 * dt + 1e-9, "{}", est.channels[1].line());
+    }
+
+    /// A delay beyond the scan puts the best candidate at its edge: refused (no delay, a note);
+    /// a silent channel is not scanned at all.
+    #[test]
+    fn an_estimate_at_the_scans_edge_is_refused_and_a_silent_channel_is_not_scanned() {
+        let dt = 1.0 / 30.0;
+        let options = ScanOptions {
+            max_delay: 0.2,
+            silent: [false, false, false, true],
+            ..ScanOptions::default()
+        };
+        let est = estimate(&[synthetic([0.3, 0.0, 0.0, 0.15], 60.0, 7)], &options).unwrap();
+        let c = &est.channels[0];
+        assert!(c.refused_at_edge.is_some_and(|d| d >= 0.2 - dt), "{}", c.line());
+        assert!(c.delay < dt, "{}", c.line());
+        assert!(c.note.as_deref().unwrap_or("").contains("edge"), "{}", c.line());
+        let y = &est.channels[3];
+        assert!(y.silent && y.delay == 0.0 && y.lag.is_none(), "{}", y.line());
+        assert_eq!(est.response.delay[3], 0.0);
+        assert!(y.line().contains("no excitation"));
+        assert_eq!(samples(1.0, 0.01), 100);
+        assert_eq!(samples(1.0 / 15.0, 1.0 / 30.0), 2);
+        assert_eq!(samples(0.0, 0.01), 1);
     }
 
     #[test]

@@ -75,7 +75,16 @@ pub struct PdFitOptions {
     pub xi11_margin: f64,
     /// Run the fitted model freely over every segment (a post-fit check).
     pub free_run: bool,
+    /// Channels (u_vz, u_roll, u_pitch, u_yaw_rate) the logs did not excite
+    /// ([`crate::identify::excitation`]): their gain (ξ1, ξ2, ξ3, ξ4) is not taken from the fit
+    /// (which finds ~0 on a silent command) but set to the unit static gain, equal to the loop's
+    /// stiffness or damping (ξ7, ξ5, ξ6, ξ10): the commanded quantity follows the command once
+    /// settled.
+    pub unit_gain: [bool; 4],
 }
+
+/// Per channel: the gain ξ and the stiffness/damping ξ that sets its static gain (1-based).
+pub const CHANNEL_GAIN_XI: [(usize, usize); 4] = [(1, 7), (2, 5), (3, 6), (4, 10)];
 
 impl Default for PdFitOptions {
     fn default() -> Self {
@@ -90,6 +99,7 @@ impl Default for PdFitOptions {
             min_inertia: 1e-6,
             xi11_margin: 0.05,
             free_run: true,
+            unit_gain: [false; 4],
         }
     }
 }
@@ -594,6 +604,11 @@ pub fn fit(
     }
     for k in ROTATION_XI {
         xi[k - 1] = xr[k - 1];
+    }
+    for (j, (gain, by)) in CHANNEL_GAIN_XI.iter().enumerate() {
+        if options.unit_gain[j] {
+            xi[gain - 1] = xi[by - 1];
+        }
     }
 
     let row_stats = residuals(&data, options, &xi);

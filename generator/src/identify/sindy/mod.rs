@@ -9,7 +9,7 @@ pub use library::{eval_term, paper_library, physics_library, Library, LibraryKin
 pub use optimizer::{lstsq, regress, Optimizer, OptimizerError, Regression, Regularizer};
 
 use super::dataset::Dataset;
-use crate::model::{Coefficient, SindyFile, DEFAULT_INPUTS, DEFAULT_STATES, FORMAT};
+use crate::model::{Base, Coefficient, SindyFile, DEFAULT_INPUTS, DEFAULT_STATES, FORMAT};
 use nalgebra::DMatrix;
 use serde_json::{json, Map, Value};
 
@@ -79,6 +79,10 @@ pub struct SindyOptions {
     pub rows: FittedRows,
     /// The sample count N the information criteria use (default: [`SampleCount::Effective`]).
     pub sample_count: SampleCount,
+    /// Variables (index in the 16 states-then-inputs) the logs did not excite
+    /// ([`crate::identify::excitation`]): every library term that uses one is left out of the
+    /// regression (coefficient 0) and listed in the provenance (`excluded_unexcited_terms`).
+    pub excluded_vars: Vec<usize>,
 }
 
 /// The N of AIC = N ln(RSS/N) + 2k and BIC = N ln(RSS/N) + k ln N.
@@ -114,6 +118,7 @@ impl Default for SindyOptions {
             criterion: Criterion::Aic,
             rows: FittedRows::Dynamic,
             sample_count: SampleCount::Effective,
+            excluded_vars: Vec::new(),
         }
     }
 }
@@ -184,6 +189,8 @@ pub struct SindyFit {
     pub samples: usize,
     /// Library terms that are identically zero on the data, left out of the regression (coefficient 0).
     pub dropped_terms: Vec<String>,
+    /// Library terms left out because they use an unexcited variable (`options.excluded_vars`).
+    pub excluded_terms: Vec<String>,
     /// Ξ of every sweep value (same layout as `coefficients`).
     pub sweep_coefficients: Vec<DMatrix<f64>>,
     /// The sweep value (index into `sweep`) each target's row is taken from.
@@ -223,7 +230,7 @@ impl SindyFit {
             &self.targets,
             &rows,
             &self.sweep,
-            &self.dropped_terms,
+            (&self.dropped_terms, &self.excluded_terms),
         );
         self.file.coefficients = entries;
         self.coefficients = coefficients;
@@ -305,12 +312,27 @@ pub fn fit_with_progress(
         let theta_end = library.matrix(ends.iter().map(|v| v.as_slice()));
         theta_full = (theta_full + theta_end) * 0.5;
     }
+    // Terms of a variable the logs did not excite are left out (docs/sindy.md, "Unexcited
+    // directions").
+    let excluded: Vec<bool> = library
+        .terms
+        .iter()
+        .map(|t| {
+            t.factors.iter().any(|(b, _)| match b {
+                Base::Var(v) | Base::Sin(v) | Base::Cos(v) => options.excluded_vars.contains(v),
+            })
+        })
+        .collect();
+    let excluded_terms: Vec<String> = (0..library.len())
+        .filter(|&j| excluded[j])
+        .map(|j| library.names[j].clone())
+        .collect();
     // Identically zero columns cannot be normalised and carry no information: leave them out.
     let kept: Vec<usize> = (0..library.len())
-        .filter(|&j| theta_full.column(j).iter().any(|&v| v != 0.0))
+        .filter(|&j| !excluded[j] && theta_full.column(j).iter().any(|&v| v != 0.0))
         .collect();
     let dropped_terms: Vec<String> = (0..library.len())
-        .filter(|j| !kept.contains(j))
+        .filter(|&j| !excluded[j] && !kept.contains(&j))
         .map(|j| library.names[j].clone())
         .collect();
     if n < kept.len() {
@@ -399,6 +421,7 @@ pub fn fit_with_progress(
         sweep,
         samples: n,
         dropped_terms,
+        excluded_terms,
         sweep_coefficients,
         chosen: Vec::new(),
         options: options.clone(),
@@ -538,7 +561,7 @@ fn build_provenance(
     targets: &[String],
     rows: &[RowFit],
     sweep: &[SweepPoint],
-    dropped: &[String],
+    (dropped, excluded): (&[String], &[String]),
 ) -> Value {
     let mut p = match user {
         Value::Object(m) => m,
@@ -594,6 +617,9 @@ fn build_provenance(
     }
     if !dropped.is_empty() {
         p.insert("dropped_zero_columns".into(), json!(dropped));
+    }
+    if !excluded.is_empty() {
+        p.insert("excluded_unexcited_terms".into(), json!(excluded));
     }
     p.insert(
         "fit".into(),
