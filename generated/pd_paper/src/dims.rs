@@ -92,7 +92,7 @@ pub const ENVELOPE_LO: [Real; NX] = [
     -10000.0,
     -1.5,
     -1.5,
-    Real::NEG_INFINITY,
+    -10000.0,
     -50.0,
     -50.0,
     -50.0,
@@ -107,13 +107,39 @@ pub const ENVELOPE_HI: [Real; NX] = [
     10000.0,
     1.5,
     1.5,
+    10000.0,
+    50.0,
+    50.0,
+    50.0,
+    30.0,
+    30.0,
+    30.0,
+];
+/// Largest error per state the QP is shown, as one ellipsoid over the states with a finite bound
+/// (`Real::INFINITY`: none): ‖(r₀ᵢ − x̄₀ᵢ)/Bᵢ‖₂ ≤ 1, the reference window translated towards the
+/// guess beyond it (`max_position_error` on x, y, z; docs/mpc.md, "Recovery").
+pub const REFERENCE_ERROR_BOUND: [Real; NX] = [
+    3.0,
+    3.0,
+    3.0,
     Real::INFINITY,
-    50.0,
-    50.0,
-    50.0,
-    30.0,
-    30.0,
-    30.0,
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+    Real::INFINITY,
+];
+/// Growth of `REFERENCE_ERROR_BOUND` along the horizon, per second (`recovery_speed` /
+/// `max_position_error`): beyond the bound the point the QP chases moves towards the reference at
+/// `recovery_speed` (docs/mpc.md, "Recovery").
+pub const REFERENCE_APPROACH_RATE: Real = 1.3333333333333333;
+/// States that are angles on the circle (yaw, by name): their errors are taken modulo 2π
+/// (docs/mpc.md, "Angles on the circle").
+pub const WRAPPED: [bool; NX] = [
+    false, false, false, false, false, true, false, false, false, false, false, false,
 ];
 /// Added to the diagonal of the condensed Hessian.
 pub const REGULARISATION: Real = 0.000000001;

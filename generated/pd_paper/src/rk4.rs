@@ -9,7 +9,11 @@ use crate::model::{
     sensitivity_stage3, sensitivity_stage3_at_identity, sensitivity_stage4,
     sensitivity_stage4_at_identity, NJ,
 };
-use crate::{Real, DT, INPUT_LEAD, N, NU, NX, NZ, SUBSTEPS};
+use crate::math::sqrt;
+use crate::{
+    Real, DISTURBANCE_BOUND, DT, INPUT_LEAD, N, NU, NX, NZ, REFERENCE_APPROACH_RATE,
+    REFERENCE_ERROR_BOUND, SUBSTEPS, WRAPPED,
+};
 /// Substep length h = DT / M.
 pub const H: Real = DT / SUBSTEPS as Real;
 /// y = x + a k
@@ -153,4 +157,91 @@ pub fn input_to_send(us: &[[Real; NU]; N]) -> [Real; NU] {
         u[i] = us[INPUT_LEAD[i].min(N - 1)][i];
     }
     u
+}
+/// e with each eᵢ clamped into ±`DISTURBANCE_BOUND[i]`, and whether it was within already.
+#[inline]
+#[allow(clippy::manual_clamp)]
+pub fn bound_disturbance(e: &[Real; NX]) -> ([Real; NX], bool) {
+    let mut out = *e;
+    for i in 0..NX {
+        out[i] = e[i].max(-DISTURBANCE_BOUND[i]).min(DISTURBANCE_BOUND[i]);
+    }
+    let within = out == *e;
+    (out, within)
+}
+/// 2π in `Real`.
+const TAU: Real = 6.283_185_307_179_586;
+/// d − 2π·m for the whole m that puts it in [−π, π] (up to rounding at the ends). Finite for every
+/// finite d; far beyond the envelope (|d| ≳ 2⁶³·2π) the result means nothing, which
+/// `OutOfEnvelope` reports.
+#[inline]
+pub fn wrap_angle(d: Real) -> Real {
+    let turns = (d / TAU) as i64;
+    let mut w = d - TAU * turns as Real;
+    if w > 0.5 * TAU {
+        w -= TAU;
+    } else if w < -0.5 * TAU {
+        w += TAU;
+    }
+    w
+}
+/// The measurement x₀ with each angle on the circle (`WRAPPED`) moved by whole turns next to the
+/// guess's x̄₀: an estimator's yaw wrapped to (−π, π] and the solver's unwrapped one are the same
+/// heading (docs/mpc.md, "Angles on the circle").
+#[inline]
+pub fn unwrap_measurement(x0: &[Real; NX], guess: &[Real; NX]) -> [Real; NX] {
+    let mut out = *x0;
+    for i in 0..NX {
+        if WRAPPED[i] {
+            out[i] = guess[i] + wrap_angle(x0[i] - guess[i]);
+        }
+    }
+    out
+}
+/// The reference window the QP tracks, conditioned in place against the guess's x̄₀
+/// (docs/mpc.md, "Recovery" and "Angles on the circle"):
+///
+/// - each angle on the circle (`WRAPPED`) is unwrapped along the window, starting within π of
+///   x̄₀ (the heading error is taken on the circle: a reference 2π away is the same heading);
+/// - if the error of the states with a finite `REFERENCE_ERROR_BOUND` at stage 0,
+///   ‖(r₀ᵢ − x̄₀ᵢ)/Bᵢ‖₂, exceeds 1, the whole window is translated in those states towards x̄₀
+///   until it is 1: far from the reference the QP chases a point at the bound's distance, moving
+///   with the reference, rather than the reference itself (the 1 s horizon without a velocity
+///   weight otherwise flies the aircraft past it at full tilt into an orbit behind it). Within the
+///   bound the window is unchanged.
+///
+/// Idempotent: conditioning a conditioned window against the same x̄₀ changes nothing.
+pub fn condition_reference(reference: &mut [[Real; NX]; N + 1], guess: &[Real; NX]) {
+    for i in 0..NX {
+        if WRAPPED[i] {
+            let mut previous = guess[i];
+            for row in reference.iter_mut() {
+                row[i] = previous + wrap_angle(row[i] - previous);
+                previous = row[i];
+            }
+        }
+    }
+    let reference0 = reference[0];
+    let mut excess: Real = 0.0;
+    for i in 0..NX {
+        if REFERENCE_ERROR_BOUND[i].is_finite() {
+            let e = (reference[0][i] - guess[i]) / REFERENCE_ERROR_BOUND[i];
+            excess += e * e;
+        }
+    }
+    if excess > 1.0 && excess.is_finite() {
+        let error = sqrt(excess);
+        for (k, row) in reference.iter_mut().enumerate() {
+            let bound = 1.0 + REFERENCE_APPROACH_RATE * DT * k as Real;
+            if bound >= error {
+                break;
+            }
+            let cut = 1.0 - bound / error;
+            for i in 0..NX {
+                if REFERENCE_ERROR_BOUND[i].is_finite() {
+                    row[i] -= (reference0[i] - guess[i]) * cut;
+                }
+            }
+        }
+    }
 }

@@ -9,8 +9,8 @@ use crate::kernels;
 use crate::math::sqrt;
 use crate::qp::{BoxQp, QpResult, QpStatus};
 use crate::rk4::{
-    discrete_dynamics, discrete_linearization_into, hold_sent_inputs, input_to_send,
-    is_sent,
+    condition_reference, discrete_dynamics, discrete_linearization_into,
+    hold_sent_inputs, input_to_send, is_sent, bound_disturbance, unwrap_measurement,
 };
 use crate::{
     Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, MAX_QP_WORK, N, NU, NV, NX, Q,
@@ -198,14 +198,17 @@ impl Mpc {
     }
     /// Predict with the disturbance e from the next `prepare` on: x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e at every
     /// stage (offset-free tracking: the runtime's `DisturbanceObserver` estimates e; docs/mpc.md).
-    /// A constant e leaves Aₖ and Bₖ as they are and moves the defects only. Returns false,
-    /// changing nothing, if a value is not finite.
+    /// A constant e leaves Aₖ and Bₖ as they are and moves the defects only. Each eᵢ is clamped
+    /// into ±`DISTURBANCE_BOUND[i]` (what the runtime's observer may estimate; 0 where it
+    /// estimates none): returns false if a value had to be clamped, or, changing nothing, if a
+    /// value is not finite.
     pub fn set_disturbance(&mut self, e: &[Real; NX]) -> bool {
         if !all_finite(e) {
             return false;
         }
-        self.disturbance = *e;
-        true
+        let (bounded, within) = bound_disturbance(e);
+        self.disturbance = bounded;
+        within
     }
     /// The disturbance e the prediction uses (`set_disturbance`).
     pub fn disturbance(&self) -> &[Real; NX] {
@@ -227,6 +230,7 @@ impl Mpc {
             return Status::InvalidInput;
         }
         self.reference = *reference;
+        condition_reference(&mut self.reference, &self.xs[0]);
         self.has_reference = true;
         if !self.linearize() {
             self.phase = Phase::Failed;
@@ -475,6 +479,7 @@ impl Mpc {
         if !all_finite(x0) {
             return self.keep_plan(Status::InvalidInput);
         }
+        let x0 = &unwrap_measurement(x0, &self.xs[0]);
         let regularised = match self.phase {
             Phase::Prepared { regularised } => regularised,
             Phase::InvalidReference => return self.keep_plan(Status::InvalidInput),
