@@ -401,9 +401,15 @@ where
     /// catches up — shifts the solver and moves the reference to the measurement's sample (rounded)
     /// and prepares there — counts the missed samples in [`SupervisorReport::deadline_misses`] and
     /// reports [`DeadlineMissed`](ControlErrorKind::DeadlineMissed) (the input is valid). A `t` on
-    /// the prepared sample (or earlier) is an ordinary `feedback`.
+    /// the prepared sample (or earlier) is an ordinary `feedback`; before any `start` or
+    /// `prepare_next`, `feedback_at(t, x)` starts at t.
     pub fn feedback_at(&mut self, t: impl Into<f64>, x0: &[R; NX]) -> Result<Solution<R, NU>, ControlError<R, NU>> {
         let t = t.into();
+        if !self.started {
+            // The first measurement sets the time (as `start(t)`); a reference error leaves the
+            // solver unprepared or on the previous window, which `feedback` reports.
+            let _ = self.start(t);
+        }
         let mut behind = 0;
         if self.started {
             let samples = (t - self.time()) / Self::DT.to_f64();

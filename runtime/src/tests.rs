@@ -908,7 +908,7 @@ fn mpc_adapter_forwards_and_converts() {
     assert_eq!(c.start(0.0), Ok(Status::HessianRegularised));
     assert_eq!(c.feedback(&[0.0; 12]).map(|s| s.status), Ok(Status::IterationCap));
     c.prepare_next().unwrap();
-    assert_close(c.time() as f64, 0.05, 1e-7);
+    assert_close(c.time(), 0.05, 1e-7);
     let w: [[f32; 12]; 6] = *c.reference_window();
     assert_eq!(adapter.inner().reference, w);
     assert_eq!(adapter.inner().shifts, 1);

@@ -215,15 +215,14 @@ impl Mpc {
     /// stage (offset-free tracking: the runtime's `DisturbanceObserver` estimates e; docs/mpc.md).
     /// A constant e leaves Aₖ and Bₖ as they are and moves the defects only. Each eᵢ is clamped
     /// into ±`DISTURBANCE_BOUND[i]` (what the runtime's observer may estimate; 0 where it
-    /// estimates none): returns false if a value had to be clamped, or, changing nothing, if a
+    /// estimates none; `disturbance()` shows what is used). Returns false, changing nothing, if a
     /// value is not finite.
     pub fn set_disturbance(&mut self, e: &[Real; NX]) -> bool {
         if !all_finite(e) {
             return false;
         }
-        let (bounded, within) = bound_disturbance(e);
-        self.disturbance = bounded;
-        within
+        self.disturbance = bound_disturbance(e);
+        true
     }
 
     /// The disturbance e the prediction uses (`set_disturbance`).
@@ -792,8 +791,8 @@ mod tests {
         assert!(mpc.set_disturbance(&e));
         assert!(!mpc.set_disturbance(&[Real::NAN, 0.0]), "a NaN is refused");
         assert_eq!(mpc.disturbance(), &e);
-        // Beyond DISTURBANCE_BOUND ([0, 0.1] here) it is clamped, and said so.
-        assert!(!mpc.set_disturbance(&[1e300, -1e300]));
+        // Beyond DISTURBANCE_BOUND ([0, 0.1] here) it is clamped.
+        assert!(mpc.set_disturbance(&[1e300, -1e300]));
         assert_eq!(mpc.disturbance(), &[0.0, -0.1]);
         assert!(mpc.set_disturbance(&e));
         let x0 = [0.1, 0.0];

@@ -183,15 +183,14 @@ impl Mpc {
     /// stage (offset-free tracking: the runtime's `DisturbanceObserver` estimates e; docs/mpc.md).
     /// A constant e leaves Aₖ and Bₖ as they are and moves the defects only. Each eᵢ is clamped
     /// into ±`DISTURBANCE_BOUND[i]` (what the runtime's observer may estimate; 0 where it
-    /// estimates none): returns false if a value had to be clamped, or, changing nothing, if a
+    /// estimates none; `disturbance()` shows what is used). Returns false, changing nothing, if a
     /// value is not finite.
     pub fn set_disturbance(&mut self, e: &[Real; NX]) -> bool {
         if !all_finite(e) {
             return false;
         }
-        let (bounded, within) = bound_disturbance(e);
-        self.disturbance = bounded;
-        within
+        self.disturbance = bound_disturbance(e);
+        true
     }
 
     /// The disturbance e the prediction uses (`set_disturbance`).

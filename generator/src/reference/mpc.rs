@@ -163,13 +163,19 @@ impl GenericMpc {
     }
 
     /// Predict with x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e from the next step on (the generated `Mpc::set_disturbance`,
-    /// docs/mpc.md "Offset-free tracking"). Returns false, changing nothing, if `e` has the wrong
-    /// length or a non-finite value.
+    /// docs/mpc.md "Offset-free tracking"), each eᵢ clamped into ±the generated `DISTURBANCE_BOUND[i]`
+    /// as there. Returns false, changing nothing, if `e` has the wrong length or a non-finite value.
     pub fn set_disturbance(&mut self, e: &[f64]) -> bool {
         if e.len() != self.ir.nx || !e.iter().all(|v| v.is_finite()) {
             return false;
         }
-        self.disturbance.copy_from_slice(e);
+        let bound = self
+            .problem
+            .options
+            .disturbance_bound(&self.ir.state_names, self.problem.dt);
+        for ((d, v), b) in self.disturbance.iter_mut().zip(e).zip(bound) {
+            *d = v.clamp(-b, b);
+        }
         true
     }
 
