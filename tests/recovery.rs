@@ -189,7 +189,7 @@ macro_rules! yaw_and_inputs_test {
             let mut mpc = Mpc::new();
             // 10³⁰⁰ in f64 (in f32 it is infinite, refused below: 10³⁰ instead).
             let huge: Real = if (Real::MAX as f64) > 1e300 {
-                1e300 as Real
+                1e300_f64 as Real
             } else {
                 1e30 as Real
             };

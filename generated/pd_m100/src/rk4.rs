@@ -11,8 +11,8 @@ use crate::model::{
     sensitivity_stage4_at_identity, NJ,
 };
 use crate::{
-    Real, DISTURBANCE_BOUND, DT, INPUT_LEAD, N, NU, NX, NZ, REFERENCE_APPROACH_RATE,
-    REFERENCE_ERROR_BOUND, SUBSTEPS, WRAPPED,
+    Real, DISTURBANCE_BOUND, DT, ENVELOPE_HI, ENVELOPE_LO, INPUT_LEAD, N, NU, NX, NZ,
+    REFERENCE_APPROACH_RATE, REFERENCE_ERROR_BOUND, SUBSTEPS, WRAPPED,
 };
 /// Substep length h = DT / M.
 pub const H: Real = DT / SUBSTEPS as Real;
@@ -209,8 +209,19 @@ pub fn unwrap_measurement(x0: &[Real; NX], guess: &[Real; NX]) -> [Real; NX] {
 ///   weight otherwise flies the aircraft past it at full tilt into an orbit behind it). Within the
 ///   bound the window is unchanged.
 ///
-/// Idempotent: conditioning a conditioned window against the same x̄₀ changes nothing.
+/// Idempotent: conditioning a conditioned window against the same x̄₀ changes nothing. A window
+/// with a value outside `ENVELOPE_LO`..`ENVELOPE_HI` is left as it is (`OutOfEnvelope`).
 pub fn condition_reference(reference: &mut [[Real; NX]; N + 1], guess: &[Real; NX]) {
+    let plausible = reference
+        .iter()
+        .all(|row| {
+            row.iter()
+                .zip(ENVELOPE_LO.iter().zip(&ENVELOPE_HI))
+                .all(|(v, (lo, hi))| *v >= *lo && *v <= *hi)
+        });
+    if !plausible {
+        return;
+    }
     for i in 0..NX {
         if WRAPPED[i] {
             let mut previous = guess[i];
