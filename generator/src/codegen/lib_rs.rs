@@ -60,7 +60,7 @@ pub fn dims_values(
     let error_bound = mpc
         .reference_error_bound(&ir.state_names)
         .into_iter()
-        .map(|b| bound(b))
+        .map(&bound)
         .collect::<Result<Vec<_>, _>>()?;
     // Angles on the circle: yaw, by name.
     let wrapped = ir.state_names.iter().map(|s| s == "yaw");
