@@ -24,6 +24,8 @@ pub struct MpcOptionsFile {
     pub regularisation: Option<f64>,
     pub disturbance_gain: Option<f64>,
     pub disturbance_max_acceleration: Option<f64>,
+    pub max_position_error: Option<f64>,
+    pub recovery_speed: Option<f64>,
 }
 
 /// Validated options for one model.
@@ -52,6 +54,12 @@ pub struct MpcOptions {
     pub disturbance_gain: f64,
     /// Bound of the estimated disturbance acceleration on vx, vy, vz (m/s²).
     pub disturbance_max_acceleration: f64,
+    /// Largest position error (m, Euclidean over x, y, z) the QP is shown: farther from the
+    /// reference the window is translated towards the aircraft (docs/mpc.md, "Recovery").
+    pub max_position_error: f64,
+    /// Speed (m/s) at which the point the QP chases moves towards the reference along the horizon
+    /// beyond `max_position_error` (docs/mpc.md, "Recovery").
+    pub recovery_speed: f64,
 }
 
 /// Default gain of the disturbance observer: each fresh measurement moves the estimate by half of
@@ -76,6 +84,16 @@ pub fn disturbance_rows(states: &[String]) -> Vec<bool> {
         .map(|s| matches!(s.as_str(), "vx" | "vy" | "vz"))
         .collect()
 }
+
+/// Default `max_position_error` (m). With the default weights (no velocity weight, a 1 s horizon)
+/// an error of 5 m already flies the shipped SINDy model into an orbit behind the circle (10 m
+/// off the circle in x: back only after 20 s); 3 m recovers from every offset of docs/mpc.md,
+/// "Recovery". Normal tracking errors (< 1 m) never reach it: tracking is unchanged.
+pub const DEFAULT_MAX_POSITION_ERROR: f64 = 3.0;
+
+/// Default `recovery_speed` (m/s): 100 m in about 15 s; at 3 m of chased error alone (0 m/s) the
+/// approach takes 25–28 s from 100 m (docs/mpc.md, "Recovery").
+pub const DEFAULT_RECOVERY_SPEED: f64 = 4.0;
 
 /// Default cap on the Riccati interior-point iterations of one QP. Typical steps of the shipped
 /// models need 9–12; after jumps and kicks pd_m100 reaches the cap on 12 of 12,002 measured steps
@@ -168,7 +186,29 @@ impl MpcOptions {
             regularisation: 1e-9,
             disturbance_gain: DEFAULT_DISTURBANCE_GAIN,
             disturbance_max_acceleration: DEFAULT_DISTURBANCE_MAX_ACCELERATION,
+            max_position_error: DEFAULT_MAX_POSITION_ERROR,
+            recovery_speed: DEFAULT_RECOVERY_SPEED,
         }
+    }
+
+    /// `REFERENCE_ERROR_BOUND` of the generated crate: `max_position_error` on the states named
+    /// x, y, z, `f64::INFINITY` (none) elsewhere.
+    pub fn reference_error_bound(&self, states: &[String]) -> Vec<f64> {
+        states
+            .iter()
+            .map(|s| {
+                if matches!(s.as_str(), "x" | "y" | "z") {
+                    self.max_position_error
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect()
+    }
+
+    /// `REFERENCE_APPROACH_RATE` (1/s): `recovery_speed` / `max_position_error`.
+    pub fn reference_approach_rate(&self) -> f64 {
+        self.recovery_speed / self.max_position_error
     }
 
     /// Per-sample bound of each state's disturbance eᵢ (x⁺ = F(x, u) + e): the maximum acceleration
@@ -273,6 +313,12 @@ impl MpcOptions {
             .unwrap_or(d.disturbance_max_acceleration);
         crate::validate::within(disturbance_max_acceleration, (0.0, 100.0), "m/s²")
             .map_err(|m| format!("{label}: disturbance_max_acceleration: {m}"))?;
+        let max_position_error = file.max_position_error.unwrap_or(d.max_position_error);
+        crate::validate::within(max_position_error, (0.01, 1e4), "m")
+            .map_err(|m| format!("{label}: max_position_error: {m}"))?;
+        let recovery_speed = file.recovery_speed.unwrap_or(d.recovery_speed);
+        crate::validate::within(recovery_speed, (0.0, 100.0), "m/s")
+            .map_err(|m| format!("{label}: recovery_speed: {m}"))?;
         Ok(Self {
             q,
             q_terminal,
@@ -286,6 +332,8 @@ impl MpcOptions {
             regularisation,
             disturbance_gain,
             disturbance_max_acceleration,
+            max_position_error,
+            recovery_speed,
         })
     }
 

@@ -63,6 +63,59 @@ pub struct Timings {
     pub prepare: CycleStats,
 }
 
+/// The supervisor's thresholds (all in seconds or SI units, none tied to a rate), see
+/// [`Controller::with_supervision`] and docs/runtime.md, "Supervisor".
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Supervision {
+    /// A measurement repeated bit for bit while its velocity (states 6..9) is not zero for longer
+    /// than this (s) is reported as [`ControlErrorKind::StaleMeasurement`]. Default 0.5 s.
+    pub stale_after: f64,
+    /// Length (s) of the saturation window of [`ControlErrorKind::NotConverging`]. Default 2 s.
+    pub window: f64,
+    /// The position error (states 0..3 against the reference) must shrink at least at this speed
+    /// (m/s) over a window in which an input was at its bound in every sample; otherwise the loop
+    /// is reported as not converging. Default 0.2 m/s.
+    pub min_closing_speed: f64,
+}
+
+impl Default for Supervision {
+    fn default() -> Self {
+        Self {
+            stale_after: 0.5,
+            window: 2.0,
+            min_closing_speed: 0.2,
+        }
+    }
+}
+
+/// What the supervisor currently sees ([`Controller::supervision`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SupervisorReport {
+    /// How long (s) the measurement has been repeated unchanged with a non-zero velocity.
+    pub held_for: f64,
+    /// The measurement is stale (`held_for` > `stale_after`).
+    pub stale: bool,
+    /// Saturated without progress over the last window.
+    pub not_converging: bool,
+    /// Samples whose `prepare_next` had not happened when their measurement came
+    /// ([`Controller::feedback_at`]), since construction (saturating).
+    pub deadline_misses: u32,
+    /// The position error (m) at the last feedback: ‖x₀..₃ − r₀..₃‖ against the first row of the
+    /// reference window.
+    pub position_error: f64,
+}
+
+/// Supervisor state.
+#[derive(Clone, Copy, Debug, Default)]
+struct SupervisorState<R, const NX: usize> {
+    config: Supervision,
+    report: SupervisorReport,
+    /// The last measurement and the time (s) it first came.
+    last: Option<([R; NX], f64)>,
+    /// Start (time, error) of the current all-saturated window.
+    saturated_since: Option<(f64, f64)>,
+}
+
 /// What went wrong in [`Controller::feedback`] (or [`Controller::step`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ControlErrorKind {
@@ -90,6 +143,19 @@ pub enum ControlErrorKind {
     /// [`Controller::step`] only: feedback succeeded but the next preparation could not get a
     /// reference window and reused the previous one, shifted.
     Reference(ReferenceError),
+    /// Supervisor: the measurement has been repeated bit for bit, with a non-zero velocity, for
+    /// longer than [`Supervision::stale_after`] (a stalled estimator). The input is the solver's for
+    /// that old state: the loop is flying blind.
+    StaleMeasurement,
+    /// Supervisor: an input has been at its bound in every sample for
+    /// [`Supervision::window`] and the position error has not shrunk by
+    /// [`Supervision::min_closing_speed`] × the window over it: the loop is not getting back.
+    NotConverging,
+    /// [`Controller::feedback_at`]: the measurement is for a later sample than the one prepared
+    /// (`prepare_next` was late or skipped): the controller caught up (shifted the solver and the
+    /// reference to the measurement's sample and prepared there) before solving. Counted in
+    /// [`Supervision`]'s `deadline_misses`.
+    DeadlineMissed,
 }
 
 impl core::fmt::Display for ControlErrorKind {
@@ -103,6 +169,9 @@ impl core::fmt::Display for ControlErrorKind {
             ControlErrorKind::NumericalFailure => f.write_str("solver reported a numerical failure"),
             ControlErrorKind::OutOfEnvelope => f.write_str("state or reference outside the model's envelope"),
             ControlErrorKind::Reference(e) => write!(f, "next reference window: {e}"),
+            ControlErrorKind::StaleMeasurement => f.write_str("stale measurement (repeated unchanged)"),
+            ControlErrorKind::NotConverging => f.write_str("saturated and not converging to the reference"),
+            ControlErrorKind::DeadlineMissed => f.write_str("deadline missed: caught up to the measurement's sample"),
         }
     }
 }
@@ -166,8 +235,11 @@ pub struct Controller<S, Src, R, const NX: usize, const NU: usize, const N1: usi
     predicted: [R; NX],
     window: [[R; NX]; N1],
     window_valid: bool,
-    t0: R,
+    /// Time (s) of sample 0, in f64 whatever `R` is (f32 cannot count samples at Unix times).
+    t0: f64,
     steps: u32,
+    started: bool,
+    supervisor: SupervisorState<R, NX>,
     prepared: bool,
     last_input: [R; NU],
     last_prepare_status: Option<Status>,
@@ -203,8 +275,10 @@ where
             predicted: [R::ZERO; NX],
             window: [[R::ZERO; NX]; N1],
             window_valid: false,
-            t0: R::ZERO,
+            t0: 0.0,
             steps: 0,
+            started: false,
+            supervisor: SupervisorState::default(),
             prepared: false,
             last_input: Self::neutral_input(),
             last_prepare_status: None,
@@ -238,6 +312,8 @@ where
             window_valid: self.window_valid,
             t0: self.t0,
             steps: self.steps,
+            started: self.started,
+            supervisor: self.supervisor,
             prepared: self.prepared,
             last_input: self.last_input,
             last_prepare_status: self.last_prepare_status,
@@ -258,13 +334,44 @@ where
         u
     }
 
-    /// Set the time to `t` (s), build its reference window and prepare the solver (no shift).
-    /// Returns the solver's prepare status, or the reference error (then the previous window, if
-    /// any, is used as it is).
-    pub fn start(&mut self, t: R) -> Result<Status, ReferenceError> {
+    /// The same controller with the supervisor's thresholds `supervision` (docs/runtime.md,
+    /// "Supervisor").
+    pub fn with_supervision(mut self, supervision: Supervision) -> Self {
+        self.supervisor.config = supervision;
+        self
+    }
+
+    /// What the supervisor sees: stale measurement, saturation without progress, missed deadlines.
+    pub fn supervision(&self) -> SupervisorReport {
+        self.supervisor.report
+    }
+
+    /// Set the time to `t` (s; f64, or an `R` — any start time works with f32 crates, the
+    /// controller keeps time in f64), build its reference window and prepare the solver.
+    ///
+    /// The first call does not shift the solver. A later call with a `t` up to N + 1 samples after
+    /// the current time shifts the solver by the samples in between (rounded), as `prepare_next`
+    /// would: calling `start(t)` every period is the same as `prepare_next`. Returns the solver's
+    /// prepare status, or the reference error (then the previous window, if any, is used as it is).
+    pub fn start(&mut self, t: impl Into<f64>) -> Result<Status, ReferenceError> {
+        let t = t.into();
+        let shifts = if self.started { self.samples_until(t) } else { 0 };
         self.t0 = t;
         self.steps = 0;
-        self.timed_prepare(false)
+        self.started = true;
+        self.timed_prepare(shifts, 0)
+    }
+
+    /// Whole samples (rounded) from the current sample's time to `t`; 0 if `t` is earlier, not
+    /// finite or more than N + 1 samples later (then nothing of the old plan is worth shifting).
+    fn samples_until(&self, t: f64) -> u32 {
+        let samples = (t - self.time()) / Self::DT.to_f64();
+        if samples.is_finite() && samples >= 0.5 && samples < (N1 as f64) + 1.5 {
+            // `as` on a finite value in range: exact, no panic.
+            (samples + 0.5) as u32
+        } else {
+            0
+        }
     }
 
     /// Reset the solver's guess to the constant `x0`, `u` (e.g. the state at take-off and the hover
@@ -280,16 +387,133 @@ where
     /// needed no correction. Otherwise `Err`, whose `solution.u0` is still safe to apply (see
     /// [`ControlErrorKind`]). In both cases the input is finite and within `[U_MIN, U_MAX]`; a NaN
     /// cost is reported as +∞.
+    ///
+    /// The supervisor ([`Supervision`]) turns an `Ok` into `Err` with
+    /// [`StaleMeasurement`](ControlErrorKind::StaleMeasurement) or
+    /// [`NotConverging`](ControlErrorKind::NotConverging) when the loop is not getting there.
     pub fn feedback(&mut self, x0: &[R; NX]) -> Result<Solution<R, NU>, ControlError<R, NU>> {
+        self.feedback_inner(x0, false)
+    }
+
+    /// [`feedback`](Self::feedback) for a measurement taken at time `t` (s, the flight computer's
+    /// clock, in f64 or `R`). If `t` falls on a later sample than the one prepared (the
+    /// `prepare_next` of the samples in between came late or not at all), the controller first
+    /// catches up — shifts the solver and moves the reference to the measurement's sample (rounded)
+    /// and prepares there — counts the missed samples in [`SupervisorReport::deadline_misses`] and
+    /// reports [`DeadlineMissed`](ControlErrorKind::DeadlineMissed) (the input is valid). A `t` on
+    /// the prepared sample (or earlier) is an ordinary `feedback`; before any `start` or
+    /// `prepare_next`, `feedback_at(t, x)` starts at t.
+    pub fn feedback_at(&mut self, t: impl Into<f64>, x0: &[R; NX]) -> Result<Solution<R, NU>, ControlError<R, NU>> {
+        let t = t.into();
+        if !self.started {
+            // The first measurement sets the time (as `start(t)`); a reference error leaves the
+            // solver unprepared or on the previous window, which `feedback` reports.
+            let _ = self.start(t);
+        }
+        let mut behind = 0;
+        if self.started {
+            let samples = (t - self.time()) / Self::DT.to_f64();
+            if samples.is_finite() && samples >= 0.5 {
+                // Saturating `as`: a huge gap is at most u32::MAX samples.
+                behind = (samples + 0.5) as u32;
+            }
+        }
+        if behind > 0 {
+            let missed = &mut self.supervisor.report.deadline_misses;
+            *missed = missed.saturating_add(behind);
+            // More than N + 1 shifts leave nothing of the old plan: shift at most that many.
+            let shifts = behind.min(u32::try_from(N1).unwrap_or(u32::MAX).saturating_add(1));
+            // The reference error, if any, is the previous window's fallback (`prepare_next`'s).
+            let _ = self.timed_prepare(shifts, behind);
+        }
+        self.feedback_inner(x0, behind > 0)
+    }
+
+    fn feedback_inner(&mut self, x0: &[R; NX], caught_up: bool) -> Result<Solution<R, NU>, ControlError<R, NU>> {
         if !self.prepared {
             // Without a reference window the prepare status is irrelevant here: `prepared` says it.
-            let _ = self.timed_prepare(false);
+            let _ = self.timed_prepare(0, 0);
         }
         let start = self.counter.cycles();
-        let result = self.feedback_prepared(x0);
+        let mut result = self.feedback_prepared(x0);
         let cycles = self.counter.cycles().wrapping_sub(start);
         self.timings.feedback.record(cycles);
+        if x0.iter().all(|v| v.is_finite()) && self.window_valid {
+            self.supervise(x0, &result);
+        }
+        if let Ok(solution) = result {
+            let report = self.supervisor.report;
+            let kind = if report.stale {
+                Some(ControlErrorKind::StaleMeasurement)
+            } else if report.not_converging {
+                Some(ControlErrorKind::NotConverging)
+            } else if caught_up {
+                Some(ControlErrorKind::DeadlineMissed)
+            } else {
+                None
+            };
+            if let Some(kind) = kind {
+                result = Err(ControlError { kind, solution });
+            }
+        }
         result
+    }
+
+    /// Update the supervisor with a finite measurement and the feedback's result.
+    fn supervise(&mut self, x0: &[R; NX], result: &Result<Solution<R, NU>, ControlError<R, NU>>) {
+        let now = self.time();
+        let config = self.supervisor.config;
+        let state = &mut self.supervisor;
+        // Stale: the same values again, while the velocity says the aircraft moves.
+        let moving = x0.iter().skip(6).take(3).any(|v| *v != R::ZERO);
+        match state.last {
+            Some((last, since)) if last == *x0 && moving => {
+                state.report.held_for = now - since;
+            }
+            _ => {
+                state.last = Some((*x0, now));
+                state.report.held_for = 0.0;
+            }
+        }
+        state.report.stale = state.report.held_for > config.stale_after;
+        // Position error against the first row of the window (states 0..3).
+        let error = x0
+            .iter()
+            .zip(self.window.first().into_iter().flatten())
+            .take(3)
+            .map(|(x, r)| {
+                let d: f64 = (*x - *r).into();
+                d * d
+            })
+            .sum::<f64>();
+        let error = libm::sqrt(error);
+        state.report.position_error = error;
+        let solution = match result {
+            Ok(s) => s,
+            Err(e) => &e.solution,
+        };
+        let saturated = solution
+            .u0
+            .iter()
+            .zip(S::U_MIN.iter().zip(S::U_MAX.iter()))
+            .any(|(u, (lo, hi))| {
+                let margin = (*hi - *lo).abs() * R::from_f64(1e-6);
+                (*u - *lo).abs() <= margin || (*hi - *u).abs() <= margin
+            });
+        if !saturated {
+            state.saturated_since = None;
+            state.report.not_converging = false;
+        } else {
+            match state.saturated_since {
+                None => state.saturated_since = Some((now, error)),
+                Some((since, error_then)) if now - since >= config.window => {
+                    let progress = error_then - error;
+                    state.report.not_converging = progress < config.min_closing_speed * (now - since);
+                    state.saturated_since = Some((now, error));
+                }
+                Some(_) => {}
+            }
+        }
     }
 
     fn feedback_prepared(&mut self, x0: &[R; NX]) -> Result<Solution<R, NU>, ControlError<R, NU>> {
@@ -359,7 +583,8 @@ where
     /// solver's prepare status, or the reference error (the previous window shifted by one sample is
     /// used instead; if there never was one, the solver stays unprepared).
     pub fn prepare_next(&mut self) -> Result<Status, ReferenceError> {
-        self.timed_prepare(true)
+        self.started = true;
+        self.timed_prepare(1, 1)
     }
 
     /// `feedback(x0)` then `prepare_next()`. A reference error of the preparation turns an `Ok`
@@ -376,26 +601,27 @@ where
         }
     }
 
-    fn timed_prepare(&mut self, advance: bool) -> Result<Status, ReferenceError> {
+    /// Shift the solver `shifts` times, advance the sample count by `steps`, prepare.
+    fn timed_prepare(&mut self, shifts: u32, steps: u32) -> Result<Status, ReferenceError> {
         let start = self.counter.cycles();
-        let result = self.prepare_inner(advance);
+        for _ in 0..shifts {
+            // The input handed out for the sample that just ended was applied over it.
+            self.predictor.record(&self.last_input);
+            self.solver.shift();
+        }
+        self.steps = self.steps.saturating_add(steps);
+        let result = self.prepare_inner(shifts > 0);
         let cycles = self.counter.cycles().wrapping_sub(start);
         self.timings.prepare.record(cycles);
         result
     }
 
     fn prepare_inner(&mut self, advance: bool) -> Result<Status, ReferenceError> {
-        if advance {
-            // The input handed out for the sample that just ended was applied over it.
-            self.predictor.record(&self.last_input);
-            self.solver.shift();
-            self.steps = self.steps.saturating_add(1);
-        }
         // The solver starts from the state when this sample's input takes effect, D samples
         // ahead: its reference window starts there too.
         let t = self.reference_time();
         let mut window = self.window;
-        let built = match self.reference.window(t, Self::DT, &mut window) {
+        let built = match self.reference.window_at(t, Self::DT.to_f64(), &mut window) {
             Ok(()) if window.iter().flatten().all(|v| v.is_finite()) => Ok(()),
             Ok(()) => Err(ReferenceError::NonFinite),
             Err(e) => Err(e),
@@ -429,16 +655,16 @@ where
         built.map(|()| status)
     }
 
-    /// The time (s) of the current sample: t₀ + k·DT.
-    pub fn time(&self) -> R {
-        self.t0 + R::from_u32(self.steps) * Self::DT
+    /// The time (s) of the current sample: t₀ + k·DT, in f64 whatever `R` is.
+    pub fn time(&self) -> f64 {
+        self.t0 + f64::from(self.steps) * Self::DT.to_f64()
     }
 
     /// The time (s) of the first row of the reference window: t₀ + (k + D)·DT, D = the
     /// predictor's look-ahead (the largest input delay in samples; 0 without delay compensation).
-    pub fn reference_time(&self) -> R {
+    pub fn reference_time(&self) -> f64 {
         let lead = u32::try_from(self.predictor.lookahead()).unwrap_or(u32::MAX);
-        self.t0 + R::from_u32(self.steps.saturating_add(lead)) * Self::DT
+        self.t0 + f64::from(self.steps.saturating_add(lead)) * Self::DT.to_f64()
     }
 
     /// k: samples since `start` (or construction), saturating.

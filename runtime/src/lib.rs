@@ -59,7 +59,10 @@ mod real;
 pub mod reference;
 pub mod solver;
 
-pub use controller::{ControlError, ControlErrorKind, Controller, CycleCounter, CycleStats, NoCycleCounter, Timings};
+pub use controller::{
+    ControlError, ControlErrorKind, Controller, CycleCounter, CycleStats, NoCycleCounter, Supervision,
+    SupervisorReport, Timings,
+};
 pub use delay::{DelayCompensator, DelayTooLong, NoDelay, StatePredictor};
 pub use disturbance::DisturbanceObserver;
 pub use real::Real;

@@ -21,6 +21,7 @@ pub trait Real:
     + AddAssign
     + SubAssign
     + MulAssign
+    + Into<f64>
     + 'static
 {
     /// 0.

@@ -35,6 +35,14 @@ pub trait ReferenceSource<R: Real, const NX: usize, const N1: usize> {
     /// may be partly written; the [`Controller`](crate::Controller) then falls back to its previous
     /// window.
     fn window(&mut self, t0: R, dt: R, out: &mut [[R; NX]; N1]) -> Result<(), ReferenceError>;
+
+    /// [`window`](Self::window) with the times in f64, which the [`Controller`](crate::Controller)
+    /// calls (it keeps time in f64 whatever `R` is). The default converts them to `R`; a source
+    /// that must stay exact at large times with `R = f32` (f32 resolves 128 s at t = 1.7·10⁹ s,
+    /// Unix time) overrides it and computes in f64, as [`Trajectory`] does.
+    fn window_at(&mut self, t0: f64, dt: f64, out: &mut [[R; NX]; N1]) -> Result<(), ReferenceError> {
+        self.window(R::from_f64(t0), R::from_f64(dt), out)
+    }
 }
 
 /// The time of sample k of a window: `t0 + k·dt` (no accumulated rounding).
@@ -138,6 +146,22 @@ impl<R: Real, const NX: usize, const N1: usize> ReferenceSource<R, NX, N1> for T
     fn window(&mut self, t0: R, dt: R, out: &mut [[R; NX]; N1]) -> Result<(), ReferenceError> {
         let trajectory = *self;
         fill_window(t0, dt, out, |t| trajectory.state(t))
+    }
+
+    /// Evaluated in f64 and then converted to `R`: exact at any time for f32 crates too.
+    fn window_at(&mut self, t0: f64, dt: f64, out: &mut [[R; NX]; N1]) -> Result<(), ReferenceError> {
+        let trajectory = *self;
+        for (k, row) in out.iter_mut().enumerate() {
+            let t = sample_time(t0, dt, k);
+            let state: [f64; NX] = trajectory.state(t);
+            for (r, v) in row.iter_mut().zip(state) {
+                *r = R::from_f64(v);
+            }
+            if !row.iter().all(|v| v.is_finite()) {
+                return Err(ReferenceError::NonFinite);
+            }
+        }
+        Ok(())
     }
 }
 

@@ -437,8 +437,11 @@ fn timeline_prepare_feedback_shift() {
     assert_eq!(c.solver().references[1], circular_window(1.0 + DT));
 
     // step = feedback + prepare_next; after 10 more the time is t0 + 11 DT (no drift).
-    for _ in 0..10 {
-        c.step(&x).unwrap();
+    // (A moving measurement that changes: a repeated one would be reported stale after 0.5 s.)
+    for i in 0..10 {
+        let mut xi = x;
+        xi[0] += 0.01 * f64::from(i + 1);
+        c.step(&xi).unwrap();
     }
     assert_eq!(c.step_count(), 11);
     assert_eq!(c.time(), 1.0 + 11.0 * DT);
@@ -905,7 +908,7 @@ fn mpc_adapter_forwards_and_converts() {
     assert_eq!(c.start(0.0), Ok(Status::HessianRegularised));
     assert_eq!(c.feedback(&[0.0; 12]).map(|s| s.status), Ok(Status::IterationCap));
     c.prepare_next().unwrap();
-    assert_close(c.time() as f64, 0.05, 1e-7);
+    assert_close(c.time(), 0.05, 1e-7);
     let w: [[f32; 12]; 6] = *c.reference_window();
     assert_eq!(adapter.inner().reference, w);
     assert_eq!(adapter.inner().shifts, 1);
@@ -978,4 +981,146 @@ fn the_controller_tells_the_solver_the_observers_disturbance() {
         .unwrap()
         .with_disturbance_observer(0.0, bound);
     assert!(plain.observer().is_none() && plain.disturbance().is_none());
+}
+
+/// Supervisor: an input at its bound in every sample while the position error does not shrink is
+/// reported as `NotConverging` after one window; shrinking fast enough is not.
+#[test]
+fn saturation_without_progress_is_reported() {
+    let supervision = Supervision {
+        stale_after: 0.5,
+        window: 1.0,
+        min_closing_speed: 0.2,
+    };
+    // The fake solver's input has u_vz at its bound.
+    for (closing_speed, expect) in [(0.0, true), (0.1, true), (1.0, false)] {
+        let mut c = Controller::new(FakeSolver::new([5.0, 0.0, 0.0, 0.0]), ConstantReference([0.0; NX]))
+            .with_supervision(supervision);
+        c.start(0.0).unwrap();
+        let mut reported = Vec::new();
+        for k in 0..40 {
+            // 20 m away, closing at `closing_speed`; zero velocity (never stale).
+            let x = {
+                let mut x = [0.0; NX];
+                x[0] = 20.0 - closing_speed * k as f64 * DT;
+                x
+            };
+            reported.push(c.feedback(&x).err().map(|e| e.kind));
+            c.prepare_next().unwrap();
+        }
+        // The window (10 samples) closes at k = 10: from then on the verdict stands.
+        assert!(reported[..10].iter().all(|k| k.is_none()), "{reported:?}");
+        let flagged = reported[10..]
+            .iter()
+            .all(|k| *k == Some(ControlErrorKind::NotConverging));
+        let clean = reported[10..].iter().all(|k| k.is_none());
+        assert!(
+            if expect { flagged } else { clean },
+            "speed {closing_speed}: {reported:?}"
+        );
+        assert_eq!(c.supervision().not_converging, expect);
+    }
+    // Off the bound the flag clears at once.
+    let mut c = Controller::new(FakeSolver::new([5.0, 0.0, 0.0, 0.0]), ConstantReference([0.0; NX]))
+        .with_supervision(supervision);
+    c.start(0.0).unwrap();
+    let mut x = [0.0; NX];
+    x[0] = 20.0;
+    for _ in 0..12 {
+        let _ = c.feedback(&x);
+        c.prepare_next().unwrap();
+    }
+    assert!(c.supervision().not_converging);
+    c.solver_mut().u = [4.0, 0.0, 0.0, 0.0];
+    assert!(c.feedback(&x).is_ok());
+    assert!(!c.supervision().not_converging);
+}
+
+/// Supervisor: a moving aircraft's measurement repeated bit for bit longer than `stale_after` is
+/// reported; at rest (zero velocity) a repeated value is normal; a fresh value clears it.
+#[test]
+fn a_held_measurement_is_reported_as_stale() {
+    let mut c = Controller::new(FakeSolver::new([0.0; NU]), ConstantReference([0.0; NX]));
+    c.start(0.0).unwrap();
+    let mut moving = [0.0; NX];
+    moving[6] = 1.0;
+    let mut kinds = Vec::new();
+    for _ in 0..10 {
+        kinds.push(c.feedback(&moving).err().map(|e| e.kind));
+        c.prepare_next().unwrap();
+    }
+    // 0.5 s at DT = 0.1: held for 0.1, …, 0.5 s is fine, 0.6 s is stale.
+    assert!(kinds[..6].iter().all(|k| k.is_none()), "{kinds:?}");
+    assert!(
+        kinds[6..]
+            .iter()
+            .all(|k| *k == Some(ControlErrorKind::StaleMeasurement)),
+        "{kinds:?}"
+    );
+    assert!(c.supervision().stale && c.supervision().held_for > 0.5);
+    moving[0] = 0.1;
+    assert!(c.feedback(&moving).is_ok());
+    assert!(!c.supervision().stale);
+    let at_rest = [0.0; NX];
+    for _ in 0..20 {
+        assert!(c.feedback(&at_rest).is_ok());
+        c.prepare_next().unwrap();
+    }
+}
+
+/// Time: `feedback_at` catches up over the samples whose `prepare_next` did not happen (shifts,
+/// reference time), counts and reports them; `start(t)` again shifts like `prepare_next`.
+#[test]
+fn missed_deadlines_are_caught_up_and_counted() {
+    let mut c = Controller::new(FakeSolver::new([0.0; NU]), Trajectory::Circular);
+    c.start(1.0).unwrap();
+    assert!(c.feedback_at(1.0, &[0.0; NX]).is_ok());
+    // No prepare_next: the next measurement comes 3 samples later.
+    let e = c.feedback_at(1.0 + 3.0 * DT, &[0.0; NX]).unwrap_err();
+    assert_eq!(e.kind, ControlErrorKind::DeadlineMissed);
+    assert_eq!(c.supervision().deadline_misses, 3);
+    assert_eq!(c.step_count(), 3);
+    assert_close(c.time(), 1.3, 1e-12);
+    let shifts = c.solver().events.iter().filter(|e| **e == Event::Shift).count();
+    assert_eq!(shifts, 3);
+    let last = c.solver().references.last().unwrap();
+    assert_close(last[0][0], 5.0 * 1.3f64.cos(), 1e-12);
+    // On time: no miss.
+    c.prepare_next().unwrap();
+    assert!(c.feedback_at(1.4, &[0.0; NX]).is_ok());
+    assert_eq!(c.supervision().deadline_misses, 3);
+
+    // start(t) each period = prepare_next.
+    let mut a = Controller::new(FakeSolver::new([0.0; NU]), Trajectory::Circular);
+    let mut b = Controller::new(FakeSolver::new([0.0; NU]), Trajectory::Circular);
+    a.start(0.0).unwrap();
+    b.start(0.0).unwrap();
+    for k in 1..20 {
+        let _ = a.feedback(&[0.0; NX]);
+        let _ = b.feedback(&[0.0; NX]);
+        a.prepare_next().unwrap();
+        b.start(k as f64 * DT).unwrap();
+    }
+    assert_eq!(a.solver().events, b.solver().events);
+    assert_close(a.time(), b.time(), 1e-12);
+    assert_close(a.reference_window()[0][0], b.reference_window()[0][0], 1e-12);
+}
+
+/// Time is kept in f64: an f32 controller at Unix time still steps its reference window.
+#[test]
+fn f32_controllers_keep_time_at_unix_epochs() {
+    let mut c = Controller::new(Offset, Trajectory::Circular);
+    c.start(1.7e9).unwrap();
+    for _ in 0..3 {
+        let _ = c.feedback(&[0.0; 2]);
+        c.prepare_next().unwrap();
+    }
+    let t = 1.7e9 + 3.0 * f64::from(<Offset as MpcSolver<f32, 2, 2, 3>>::DT);
+    assert_close(c.time(), t, 1e-15);
+    let w = c.reference_window();
+    for (k, row) in w.iter().enumerate() {
+        let tk = t + k as f64 * f64::from(<Offset as MpcSolver<f32, 2, 2, 3>>::DT);
+        assert!((f64::from(row[0]) - 5.0 * tk.cos()).abs() < 1e-5, "row {k}");
+    }
+    assert_ne!(w[0], w[1]);
 }

@@ -60,6 +60,17 @@ pub const TRUST_BOUND: [Real; NX] = [2.0, Real::INFINITY];
 pub const ENVELOPE_LO: [Real; NX] = [-1.0e4, Real::NEG_INFINITY];
 /// Upper end of the plausibility envelope (see `ENVELOPE_LO`).
 pub const ENVELOPE_HI: [Real; NX] = [1.0e4, Real::INFINITY];
+/// Largest error per state the QP is shown, as one ellipsoid over the states with a finite bound
+/// (`Real::INFINITY`: none): ‖(r₀ᵢ − x̄₀ᵢ)/Bᵢ‖₂ ≤ 1, the reference window translated towards the
+/// guess beyond it (`max_position_error` on x, y, z; docs/mpc.md, "Recovery").
+pub const REFERENCE_ERROR_BOUND: [Real; NX] = [20.0, Real::INFINITY];
+/// Growth of `REFERENCE_ERROR_BOUND` along the horizon, per second (`recovery_speed` /
+/// `max_position_error`): beyond the bound the point the QP chases moves towards the reference at
+/// `recovery_speed` (docs/mpc.md, "Recovery").
+pub const REFERENCE_APPROACH_RATE: Real = 1.0;
+/// States that are angles on the circle (yaw, by name): their errors are taken modulo 2π
+/// (docs/mpc.md, "Angles on the circle").
+pub const WRAPPED: [bool; NX] = [false, false];
 /// Added to the diagonal of the condensed Hessian.
 pub const REGULARISATION: Real = 1e-9;
 /// Gain of the runtime's disturbance observer (`disturbance_gain`, 0 = off): each fresh

@@ -5,7 +5,10 @@
 use crate::kernels;
 use crate::math::sqrt;
 use crate::qp::{BoxQp, QpResult, QpStatus};
-use crate::rk4::{discrete_dynamics, discrete_linearization_into, hold_sent_inputs, input_to_send, is_sent};
+use crate::rk4::{
+    bound_disturbance, condition_reference, discrete_dynamics, discrete_linearization_into, hold_sent_inputs,
+    input_to_send, is_sent, unwrap_measurement,
+};
 use crate::{
     Real, ENVELOPE_HI, ENVELOPE_LO, MAX_QP_ITERATIONS, MAX_QP_WORK, N, NU, NV, NX, Q, Q_TERMINAL, R, REGULARISATION,
     R_DELTA, TRUST_BOUND, U_MAX, U_MIN,
@@ -210,13 +213,15 @@ impl Mpc {
 
     /// Predict with the disturbance e from the next `prepare` on: x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e at every
     /// stage (offset-free tracking: the runtime's `DisturbanceObserver` estimates e; docs/mpc.md).
-    /// A constant e leaves Aₖ and Bₖ as they are and moves the defects only. Returns false,
-    /// changing nothing, if a value is not finite.
+    /// A constant e leaves Aₖ and Bₖ as they are and moves the defects only. Each eᵢ is clamped
+    /// into ±`DISTURBANCE_BOUND[i]` (what the runtime's observer may estimate; 0 where it
+    /// estimates none; `disturbance()` shows what is used). Returns false, changing nothing, if a
+    /// value is not finite.
     pub fn set_disturbance(&mut self, e: &[Real; NX]) -> bool {
         if !all_finite(e) {
             return false;
         }
-        self.disturbance = *e;
+        self.disturbance = bound_disturbance(e);
         true
     }
 
@@ -243,6 +248,8 @@ impl Mpc {
             return Status::InvalidInput;
         }
         self.reference = *reference;
+        // Angles unwrapped next to x̄₀, the window translated to within REFERENCE_ERROR_BOUND of it.
+        condition_reference(&mut self.reference, &self.xs[0]);
         self.has_reference = true;
         if !self.linearize() {
             self.phase = Phase::Failed;
@@ -520,6 +527,8 @@ impl Mpc {
         if !all_finite(x0) {
             return self.keep_plan(Status::InvalidInput);
         }
+        // Angles moved by whole turns next to x̄₀: the heading the plan holds (docs/mpc.md).
+        let x0 = &unwrap_measurement(x0, &self.xs[0]);
         let regularised = match self.phase {
             Phase::Prepared { regularised } => regularised,
             Phase::InvalidReference => return self.keep_plan(Status::InvalidInput),
@@ -778,10 +787,14 @@ mod tests {
         // With e set, the converged plan's states follow x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e (the model is linear:
         // the second RTI step is the exact solution).
         let mut mpc = Mpc::new();
-        let e = [0.01, -0.02];
+        let e = [0.0, -0.02];
         assert!(mpc.set_disturbance(&e));
         assert!(!mpc.set_disturbance(&[Real::NAN, 0.0]), "a NaN is refused");
         assert_eq!(mpc.disturbance(), &e);
+        // Beyond DISTURBANCE_BOUND ([0, 0.1] here) it is clamped.
+        assert!(mpc.set_disturbance(&[1e300, -1e300]));
+        assert_eq!(mpc.disturbance(), &[0.0, -0.1]);
+        assert!(mpc.set_disturbance(&e));
         let x0 = [0.1, 0.0];
         mpc.solve(&x0, &reference(0.5));
         assert_eq!(mpc.solve(&x0, &reference(0.5)).status, Status::Solved);
@@ -847,9 +860,10 @@ mod tests {
 
     #[test]
     fn saturating_reference_keeps_inputs_on_the_bound() {
-        // A far setpoint saturates u at its upper bound.
+        // A far setpoint saturates u at its upper bound (21 away; the QP sees 20 at stage 0,
+        // REFERENCE_ERROR_BOUND, and 21 from stage 1).
         let mut mpc = Mpc::new();
-        let s = mpc.solve(&[0.0, 0.0], &reference(100.0));
+        let s = mpc.solve(&[0.0, 0.0], &reference(21.0));
         assert_eq!(s.u0[0], U_MAX[0]);
         assert!(mpc
             .planned_inputs()

@@ -1,11 +1,15 @@
 //! Explicit RK4 with `SUBSTEPS` substeps per sample and forward sensitivities.
 
+use crate::math::sqrt;
 use crate::model::{
     continuous_derivatives, continuous_dynamics, sensitivity_stage1, sensitivity_stage1_at_identity,
     sensitivity_stage2, sensitivity_stage2_at_identity, sensitivity_stage3, sensitivity_stage3_at_identity,
     sensitivity_stage4, sensitivity_stage4_at_identity, NJ,
 };
-use crate::{Real, DT, INPUT_LEAD, N, NU, NX, NZ, SUBSTEPS};
+use crate::{
+    Real, DISTURBANCE_BOUND, DT, ENVELOPE_HI, ENVELOPE_LO, INPUT_LEAD, N, NU, NX, NZ, REFERENCE_APPROACH_RATE,
+    REFERENCE_ERROR_BOUND, SUBSTEPS, WRAPPED,
+};
 
 /// Substep length h = DT / M.
 pub const H: Real = DT / SUBSTEPS as Real;
@@ -156,6 +160,111 @@ pub fn input_to_send(us: &[[Real; NU]; N]) -> [Real; NU] {
     u
 }
 
+/// e with each eᵢ clamped into ±`DISTURBANCE_BOUND[i]` (a NaN becomes 0 or a bound).
+#[inline]
+#[allow(clippy::manual_clamp)] // `clamp` would pass a NaN through; max/min map it to a bound
+pub fn bound_disturbance(e: &[Real; NX]) -> [Real; NX] {
+    let mut out = *e;
+    for i in 0..NX {
+        out[i] = e[i].max(-DISTURBANCE_BOUND[i]).min(DISTURBANCE_BOUND[i]);
+    }
+    out
+}
+
+/// 2π in `Real`.
+const TAU: Real = core::f64::consts::TAU as Real;
+
+/// d − 2π·m for the whole m that puts it in [−π, π] (up to rounding at the ends). Finite for every
+/// finite d; far beyond the envelope (|d| ≳ 2⁶³·2π) the result means nothing, which
+/// `OutOfEnvelope` reports.
+#[inline]
+pub fn wrap_angle(d: Real) -> Real {
+    // `as` saturates and maps NaN to 0: no panic, no UB.
+    let turns = (d / TAU) as i64;
+    let mut w = d - TAU * turns as Real;
+    if w > 0.5 * TAU {
+        w -= TAU;
+    } else if w < -0.5 * TAU {
+        w += TAU;
+    }
+    w
+}
+
+/// The measurement x₀ with each angle on the circle (`WRAPPED`) moved by whole turns next to the
+/// guess's x̄₀: an estimator's yaw wrapped to (−π, π] and the solver's unwrapped one are the same
+/// heading (docs/mpc.md, "Angles on the circle").
+#[inline]
+pub fn unwrap_measurement(x0: &[Real; NX], guess: &[Real; NX]) -> [Real; NX] {
+    let mut out = *x0;
+    for i in 0..NX {
+        if WRAPPED[i] {
+            out[i] = guess[i] + wrap_angle(x0[i] - guess[i]);
+        }
+    }
+    out
+}
+
+/// The reference window the QP tracks, conditioned in place against the guess's x̄₀
+/// (docs/mpc.md, "Recovery" and "Angles on the circle"):
+///
+/// - each angle on the circle (`WRAPPED`) is unwrapped along the window, starting within π of
+///   x̄₀ (the heading error is taken on the circle: a reference 2π away is the same heading);
+/// - if the error of the states with a finite `REFERENCE_ERROR_BOUND` at stage 0,
+///   ‖(r₀ᵢ − x̄₀ᵢ)/Bᵢ‖₂, exceeds 1, the whole window is translated in those states towards x̄₀
+///   until it is 1: far from the reference the QP chases a point at the bound's distance, moving
+///   with the reference, rather than the reference itself (the 1 s horizon without a velocity
+///   weight otherwise flies the aircraft past it at full tilt into an orbit behind it). Within the
+///   bound the window is unchanged.
+///
+/// Idempotent: conditioning a conditioned window against the same x̄₀ changes nothing. A window
+/// with a value outside `ENVELOPE_LO`..`ENVELOPE_HI` is left as it is (`OutOfEnvelope`).
+pub fn condition_reference(reference: &mut [[Real; NX]; N + 1], guess: &[Real; NX]) {
+    // A window outside the plausibility envelope is left as it is: `feedback` reports it
+    // (`OutOfEnvelope`), which an unwrapped or translated copy would hide.
+    let plausible = reference.iter().all(|row| {
+        row.iter()
+            .zip(ENVELOPE_LO.iter().zip(&ENVELOPE_HI))
+            .all(|(v, (lo, hi))| *v >= *lo && *v <= *hi)
+    });
+    if !plausible {
+        return;
+    }
+    for i in 0..NX {
+        if WRAPPED[i] {
+            let mut previous = guess[i];
+            for row in reference.iter_mut() {
+                row[i] = previous + wrap_angle(row[i] - previous);
+                previous = row[i];
+            }
+        }
+    }
+    let reference0 = reference[0];
+    let mut excess: Real = 0.0;
+    for i in 0..NX {
+        if REFERENCE_ERROR_BOUND[i].is_finite() {
+            let e = (reference[0][i] - guess[i]) / REFERENCE_ERROR_BOUND[i];
+            excess += e * e;
+        }
+    }
+    if excess > 1.0 && excess.is_finite() {
+        // In units of the bound: the error at stage 0, and the bound along the horizon, growing by
+        // REFERENCE_APPROACH_RATE per second (the point chased moves towards the reference).
+        let error = sqrt(excess);
+        for (k, row) in reference.iter_mut().enumerate() {
+            let bound = 1.0 + REFERENCE_APPROACH_RATE * DT * k as Real;
+            if bound >= error {
+                break;
+            }
+            let cut = 1.0 - bound / error;
+            for i in 0..NX {
+                if REFERENCE_ERROR_BOUND[i].is_finite() {
+                    row[i] -= (reference0[i] - guess[i]) * cut;
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -222,6 +331,47 @@ mod tests {
             }
             assert!((b[i][0] - bd[i]).abs() < 1e-14);
         }
+    }
+
+    #[test]
+    fn angles_wrap_onto_the_circle() {
+        let pi = TAU / 2.0;
+        assert_eq!(wrap_angle(0.25), 0.25);
+        assert!((wrap_angle(TAU + 0.25) - 0.25).abs() < 1e-12);
+        assert!((wrap_angle(-3.0 * TAU - 0.25) + 0.25).abs() < 1e-12);
+        assert!((wrap_angle(pi + 0.1) - (0.1 - pi)).abs() < 1e-12);
+        assert!(wrap_angle(1e300).is_finite() && wrap_angle(Real::NAN).is_nan());
+    }
+
+    #[test]
+    fn a_far_reference_is_translated_to_the_bound_and_approaches_at_the_rate() {
+        // Bound 20 on state 0, growing at 1/s (2 per sample of 0.1 s): the window at 100 seen from
+        // 0 starts at 20 and comes 2 closer to 100 per sample until it is the reference itself.
+        assert_eq!(
+            (REFERENCE_ERROR_BOUND[0], REFERENCE_APPROACH_RATE, DT),
+            (20.0, 1.0, 0.1)
+        );
+        let mut r = [[100.0, 3.0]; N + 1];
+        condition_reference(&mut r, &[0.0, -1.0]);
+        for (k, row) in r.iter().enumerate() {
+            let expect = (20.0 + 2.0 * k as Real).min(100.0);
+            assert!((row[0] - expect).abs() < 1e-12, "stage {k}: {} vs {expect}", row[0]);
+            assert_eq!(row[1], 3.0, "unbounded state untouched");
+        }
+        // Idempotent, and within the bound nothing changes.
+        let once = r;
+        condition_reference(&mut r, &[0.0, -1.0]);
+        assert_eq!(r, once);
+        let mut near = [[15.0, 3.0]; N + 1];
+        condition_reference(&mut near, &[0.0, 0.0]);
+        assert_eq!(near, [[15.0, 3.0]; N + 1]);
+    }
+
+    #[test]
+    fn disturbances_are_bounded() {
+        assert_eq!(bound_disturbance(&[0.0, 0.05]), [0.0, 0.05]);
+        assert_eq!(bound_disturbance(&[1e300, -1e300]), [0.0, -0.1]);
+        assert_eq!(bound_disturbance(&[0.01, -0.2]), [0.0, -0.1]);
     }
 
     #[test]

@@ -80,6 +80,9 @@ pub fn read(crate_dir: &Path) -> Result<CrateDims, String> {
                 (Ok(b), Ok(dt)) if dt > 0.0 => b.iter().copied().fold(0.0, f64::max) / dt,
                 _ => 0.0,
             },
+            // Recovery does not change the work of a step: the defaults (crates before it have none).
+            max_position_error: crate::mpc_options::DEFAULT_MAX_POSITION_ERROR,
+            recovery_speed: crate::mpc_options::DEFAULT_RECOVERY_SPEED,
         },
     })
 }

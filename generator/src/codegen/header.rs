@@ -24,9 +24,9 @@ pub fn lines(model: &Model, options: &GenerateOptions, substeps: usize, mpc: &Mp
             if options.c_api { " c-api" } else { "" }
         ),
         format!(
-            "mpc: q={:?} q_terminal={:?} r={:?} r_delta={:?} u_min={:?} u_max={:?} max_qp_iterations={} max_qp_work={} max_ipm_iterations={} regularisation={:e} disturbance_gain={:?} disturbance_max_acceleration={:?}",
+            "mpc: q={:?} q_terminal={:?} r={:?} r_delta={:?} u_min={:?} u_max={:?} max_qp_iterations={} max_qp_work={} max_ipm_iterations={} regularisation={:e} disturbance_gain={:?} disturbance_max_acceleration={:?} max_position_error={:?} recovery_speed={:?}",
             mpc.q, mpc.q_terminal, mpc.r, mpc.r_delta, mpc.u_min, mpc.u_max, mpc.max_qp_iterations, mpc.qp_work(options.horizon), mpc.max_ipm_iterations, mpc.regularisation,
-            mpc.disturbance_gain, mpc.disturbance_max_acceleration
+            mpc.disturbance_gain, mpc.disturbance_max_acceleration, mpc.max_position_error, mpc.recovery_speed
         ),
     ]
 }

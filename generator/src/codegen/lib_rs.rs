@@ -57,6 +57,13 @@ pub fn dims_values(
             Ok(quote!(Real::NEG_INFINITY))
         }
     };
+    let error_bound = mpc
+        .reference_error_bound(&ir.state_names)
+        .into_iter()
+        .map(&bound)
+        .collect::<Result<Vec<_>, _>>()?;
+    // Angles on the circle: yaw, by name.
+    let wrapped = ir.state_names.iter().map(|s| s == "yaw");
     let disturbance_bound = mpc.disturbance_bound(&ir.state_names, 1.0 / options.rate_hz);
     let ranges = options.envelope.plausibility_ranges(&ir.state_names, declared);
     let lo = ranges.iter().map(|r| bound(r.0)).collect::<Result<Vec<_>, _>>()?;
@@ -82,6 +89,12 @@ pub fn dims_values(
         ("TRUST_BOUND", quote!([#(#trust),*])),
         ("ENVELOPE_LO", quote!([#(#lo),*])),
         ("ENVELOPE_HI", quote!([#(#hi),*])),
+        ("REFERENCE_ERROR_BOUND", quote!([#(#error_bound),*])),
+        (
+            "REFERENCE_APPROACH_RATE",
+            float_literal(mpc.reference_approach_rate(), options.float)?,
+        ),
+        ("WRAPPED", quote!([#(#wrapped),*])),
         ("REGULARISATION", float_literal(mpc.regularisation, options.float)?),
         ("DISTURBANCE_GAIN", float_literal(mpc.disturbance_gain, options.float)?),
         ("DISTURBANCE_BOUND", array(&disturbance_bound)?),

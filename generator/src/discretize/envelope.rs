@@ -17,6 +17,9 @@ pub const TRUST_FACTOR: f64 = 2.0;
 pub const PLAUSIBILITY_FACTOR: f64 = 10.0;
 /// Largest plausible |roll|, |pitch|, rad (86°: the Euler angles are singular at π/2).
 pub const PLAUSIBLE_TILT: f64 = 1.5;
+/// Largest plausible |yaw|, rad (unwrapped: about 1600 turns; in f32 the angle is then still
+/// resolved to 1e-3 rad).
+pub const PLAUSIBLE_YAW: f64 = 1e4;
 /// Largest plausible |x|, |y|, |z|, m.
 pub const PLAUSIBLE_POSITION: f64 = 1e4;
 
@@ -111,13 +114,14 @@ impl Envelope {
     /// generated crate; docs/mpc.md, "Plausibility"): |xᵢ| ≤ bound, `f64::INFINITY` where there is
     /// none. Positions 10 km, roll and pitch 1.5 rad (the Euler angles are singular at π/2), and
     /// [`PLAUSIBILITY_FACTOR`] times the envelope on velocities, body rates and the lag states;
-    /// yaw (unwrapped), `flight_time` and states of other names are unbounded.
+    /// yaw ([`PLAUSIBLE_YAW`], unwrapped), `flight_time` and states of other names are unbounded.
     pub fn plausibility_bounds(&self, states: &[String]) -> Vec<f64> {
         states
             .iter()
             .map(|name| match name.as_str() {
                 "x" | "y" | "z" => PLAUSIBLE_POSITION,
                 "roll" | "pitch" => PLAUSIBLE_TILT,
+                "yaw" => PLAUSIBLE_YAW,
                 "vx" | "vy" | "vz" | "roll_rate" | "pitch_rate" | "yaw_rate" => PLAUSIBILITY_FACTOR * self.bound(name),
                 n if n.ends_with(DOT_LAGGED_SUFFIX) || n.ends_with(LAGGED_SUFFIX) => {
                     PLAUSIBILITY_FACTOR * self.range(n).1

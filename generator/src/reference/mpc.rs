@@ -163,13 +163,19 @@ impl GenericMpc {
     }
 
     /// Predict with x̄ₖ₊₁ = F(x̄ₖ, ūₖ) + e from the next step on (the generated `Mpc::set_disturbance`,
-    /// docs/mpc.md "Offset-free tracking"). Returns false, changing nothing, if `e` has the wrong
-    /// length or a non-finite value.
+    /// docs/mpc.md "Offset-free tracking"), each eᵢ clamped into ±the generated `DISTURBANCE_BOUND[i]`
+    /// as there. Returns false, changing nothing, if `e` has the wrong length or a non-finite value.
     pub fn set_disturbance(&mut self, e: &[f64]) -> bool {
         if e.len() != self.ir.nx || !e.iter().all(|v| v.is_finite()) {
             return false;
         }
-        self.disturbance.copy_from_slice(e);
+        let bound = self
+            .problem
+            .options
+            .disturbance_bound(&self.ir.state_names, self.problem.dt);
+        for ((d, v), b) in self.disturbance.iter_mut().zip(e).zip(bound) {
+            *d = v.clamp(-b, b);
+        }
         true
     }
 
@@ -286,6 +292,10 @@ impl GenericMpc {
     /// One RTI step; also returns the step size max(max |δuₖ|, max |δxₖ|).
     fn iterate(&mut self, x0: &[f64], reference: &[Vec<f64>]) -> Result<(GenericSolution, f64), ReferenceError> {
         self.check_inputs(x0, reference)?;
+        // As the generated solver: angles unwrapped next to x̄₀, the window translated to within
+        // the position error bound (docs/mpc.md, "Recovery", "Angles on the circle").
+        let (x0, reference) = self.conditioned(x0, reference);
+        let (x0, reference) = (x0.as_slice(), reference.as_slice());
         let (nx, nu, n) = (self.ir.nx, self.ir.nu, self.problem.horizon);
 
         // A guess outside the trust region is replaced by the rollout of its inputs (done
@@ -325,6 +335,54 @@ impl GenericMpc {
             qp_iterations,
         };
         Ok((solution, step))
+    }
+
+    /// x₀ with yaw moved by whole turns next to x̄₀, and the reference the QP tracks: yaw
+    /// unwrapped along the window from x̄₀, the positions translated to within
+    /// `max_position_error` of x̄₀, that bound growing at `recovery_speed` along the horizon (the
+    /// generated crate's `condition_reference`).
+    fn conditioned(&self, x0: &[f64], reference: &[Vec<f64>]) -> (Vec<f64>, Vec<Vec<f64>>) {
+        use std::f64::consts::TAU;
+        let wrap = |d: f64| d - TAU * (d / TAU).round();
+        let guess = &self.x_guess[0];
+        let mut x = x0.to_vec();
+        let mut r = reference.to_vec();
+        let names = &self.ir.state_names;
+        for (i, name) in names.iter().enumerate() {
+            if name == "yaw" {
+                x[i] = guess[i] + wrap(x0[i] - guess[i]);
+                let mut previous = guess[i];
+                for row in r.iter_mut() {
+                    row[i] = previous + wrap(row[i] - previous);
+                    previous = row[i];
+                }
+            }
+        }
+        let o = &self.problem.options;
+        let bound = o.reference_error_bound(names);
+        let first = r[0].clone();
+        let error = bound
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| b.is_finite())
+            .map(|(i, b)| ((first[i] - guess[i]) / b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        if error > 1.0 && error.is_finite() {
+            for (k, row) in r.iter_mut().enumerate() {
+                let allowed = 1.0 + o.reference_approach_rate() * self.problem.dt * k as f64;
+                if allowed >= error {
+                    break;
+                }
+                let cut = 1.0 - allowed / error;
+                for (i, b) in bound.iter().enumerate() {
+                    if b.is_finite() {
+                        row[i] -= (first[i] - guess[i]) * cut;
+                    }
+                }
+            }
+        }
+        (x, r)
     }
 
     fn check_inputs(&self, x0: &[f64], reference: &[Vec<f64>]) -> Result<(), ReferenceError> {
@@ -696,6 +754,8 @@ mod tests {
                 regularisation,
                 disturbance_gain: 0.0,
                 disturbance_max_acceleration: 0.0,
+                max_position_error: crate::mpc_options::DEFAULT_MAX_POSITION_ERROR,
+                recovery_speed: crate::mpc_options::DEFAULT_RECOVERY_SPEED,
             },
         }
     }

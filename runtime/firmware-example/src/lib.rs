@@ -81,6 +81,9 @@ fn error_code(kind: ControlErrorKind) -> u32 {
         ControlErrorKind::NumericalFailure => 6,
         ControlErrorKind::Reference(_) => 7,
         ControlErrorKind::OutOfEnvelope => 8,
+        ControlErrorKind::StaleMeasurement => 9,
+        ControlErrorKind::NotConverging => 10,
+        ControlErrorKind::DeadlineMissed => 11,
     }
 }
 
