@@ -220,79 +220,137 @@ pub fn regress(
     normalize_columns: bool,
 ) -> Result<Regression, OptimizerError> {
     optimizer.validate()?;
-    if theta.nrows() != y.nrows() {
-        return Err(OptimizerError::Shape(theta.nrows(), y.nrows()));
-    }
-    if theta.nrows() == 0 {
-        return Err(OptimizerError::Empty);
-    }
-    if theta.iter().chain(y.iter()).any(|v| !v.is_finite()) {
-        return Err(OptimizerError::NonFinite);
-    }
-    let p = theta.ncols();
-    let mut x = theta.clone();
-    let mut norms = DVector::from_element(p, 1.0);
-    if normalize_columns {
-        for j in 0..p {
-            let n = x.column(j).norm();
-            if n == 0.0 {
-                return Err(OptimizerError::ZeroColumn(j));
+    Prepared::new(theta, y, normalize_columns)?.regress(optimizer)
+}
+
+/// What every regression on one (Θ, Ẏ) shares, computed once: the normalised Θ and its column
+/// norms, the least-squares initial guess, ΘᵀΘ and ΘᵀẎ, and the unbiasing refits by support.
+///
+/// A sparsity sweep regresses the same data with many thresholds; each of these is a pass over
+/// all N samples (the QR factorisation of the initial guess alone costs 2Np² flops), and several
+/// thresholds give a row the same support, hence the same unbiased refit. [`Prepared::regress`]
+/// computes exactly what [`regress`] computes (the same operations in the same order, so the same
+/// bits), once per data set instead of once per sweep value.
+pub struct Prepared {
+    x: DMatrix<f64>,
+    y: DMatrix<f64>,
+    norms: DVector<f64>,
+    normalize_columns: bool,
+    init: DMatrix<f64>,
+    gram: DMatrix<f64>,
+    xty: DMatrix<f64>,
+    /// The unbiased refit of target t on a support (the normalised columns' coefficients).
+    unbiased: std::collections::HashMap<(usize, Vec<usize>), Vec<f64>>,
+}
+
+impl Prepared {
+    /// Check the data and compute the shared parts (see the type's documentation).
+    pub fn new(theta: &DMatrix<f64>, y: &DMatrix<f64>, normalize_columns: bool) -> Result<Self, OptimizerError> {
+        if theta.nrows() != y.nrows() {
+            return Err(OptimizerError::Shape(theta.nrows(), y.nrows()));
+        }
+        if theta.nrows() == 0 {
+            return Err(OptimizerError::Empty);
+        }
+        if theta.iter().chain(y.iter()).any(|v| !v.is_finite()) {
+            return Err(OptimizerError::NonFinite);
+        }
+        let p = theta.ncols();
+        let mut x = theta.clone();
+        let mut norms = DVector::from_element(p, 1.0);
+        if normalize_columns {
+            for j in 0..p {
+                let n = x.column(j).norm();
+                if n == 0.0 {
+                    return Err(OptimizerError::ZeroColumn(j));
+                }
+                norms[j] = n;
+                x.column_mut(j).unscale_mut(n);
             }
-            norms[j] = n;
-            x.column_mut(j).unscale_mut(n);
         }
+        // Initial guess: lstsq(x, y), features × targets.
+        let init = lstsq(&x, y);
+        let gram = x.transpose() * &x;
+        let xty = x.transpose() * y;
+        Ok(Self {
+            x,
+            y: y.clone(),
+            norms,
+            normalize_columns,
+            init,
+            gram,
+            xty,
+            unbiased: std::collections::HashMap::new(),
+        })
     }
-    // Initial guess: lstsq(x, y), features × targets.
-    let init = lstsq(&x, y);
-    let (mut coef, iterations, converged, unbias) = match *optimizer {
-        Optimizer::Stlsq {
-            threshold,
-            alpha,
-            max_iter,
-            unbias,
-        } => {
-            let (c, it, conv) = stlsq(&x, y, &init, threshold, alpha, max_iter);
-            (c, it, conv, unbias)
-        }
-        Optimizer::Sr3 {
-            regularizer,
-            reg_weight_lam,
-            relax_coeff_nu,
-            max_iter,
-            tol,
-            unbias,
-        } => {
-            let (c, it, conv) = sr3(&x, y, &init, regularizer, reg_weight_lam, relax_coeff_nu, max_iter, tol);
-            (c, it, conv, unbias)
-        }
-    };
-    if unbias {
-        for t in 0..coef.nrows() {
-            let support: Vec<usize> = (0..p).filter(|&j| coef[(t, j)].abs() > 1e-14).collect();
-            let mut row = vec![0.0; p];
-            if !support.is_empty() {
-                let xs = x.select_columns(&support);
-                let ys = DMatrix::from_column_slice(y.nrows(), 1, y.column(t).as_slice());
-                let w = lstsq(&xs, &ys);
-                for (k, &j) in support.iter().enumerate() {
-                    row[j] = w[(k, 0)];
+
+    /// The regression with `optimizer` (what [`regress`] returns for the same data).
+    pub fn regress(&mut self, optimizer: &Optimizer) -> Result<Regression, OptimizerError> {
+        optimizer.validate()?;
+        let p = self.x.ncols();
+        let (mut coef, iterations, converged, unbias) = match *optimizer {
+            Optimizer::Stlsq {
+                threshold,
+                alpha,
+                max_iter,
+                unbias,
+            } => {
+                let (c, it, conv) = stlsq(&self.gram, &self.xty, &self.init, threshold, alpha, max_iter);
+                (c, it, conv, unbias)
+            }
+            Optimizer::Sr3 {
+                regularizer,
+                reg_weight_lam,
+                relax_coeff_nu,
+                max_iter,
+                tol,
+                unbias,
+            } => {
+                let (c, it, conv) = sr3(
+                    &self.gram,
+                    &self.xty,
+                    &self.init,
+                    regularizer,
+                    reg_weight_lam,
+                    relax_coeff_nu,
+                    max_iter,
+                    tol,
+                );
+                (c, it, conv, unbias)
+            }
+        };
+        if unbias {
+            for t in 0..coef.nrows() {
+                let support: Vec<usize> = (0..p).filter(|&j| coef[(t, j)].abs() > 1e-14).collect();
+                let (x, y) = (&self.x, &self.y);
+                let row = self.unbiased.entry((t, support)).or_insert_with_key(|(_, support)| {
+                    let mut row = vec![0.0; p];
+                    if !support.is_empty() {
+                        let xs = x.select_columns(support);
+                        let ys = DMatrix::from_column_slice(y.nrows(), 1, y.column(t).as_slice());
+                        let w = lstsq(&xs, &ys);
+                        for (k, &j) in support.iter().enumerate() {
+                            row[j] = w[(k, 0)];
+                        }
+                    }
+                    row
+                });
+                for j in 0..p {
+                    coef[(t, j)] = row[j];
                 }
             }
+        }
+        if self.normalize_columns {
             for j in 0..p {
-                coef[(t, j)] = row[j];
+                coef.column_mut(j).unscale_mut(self.norms[j]);
             }
         }
+        Ok(Regression {
+            coef,
+            iterations,
+            converged,
+        })
     }
-    if normalize_columns {
-        for j in 0..p {
-            coef.column_mut(j).unscale_mut(norms[j]);
-        }
-    }
-    Ok(Regression {
-        coef,
-        iterations,
-        converged,
-    })
 }
 
 /// Minimum-norm least squares `numpy.linalg.lstsq(a, b, rcond=None)`: features × targets.
@@ -335,19 +393,18 @@ fn solve_spd(a: DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
     }
 }
 
-/// `STLSQ._reduce`. `init`: features × targets. Returns targets × features.
+/// `STLSQ._reduce` on the normal equations (`gram` = XᵀX, `xty` = XᵀY). `init`: features × targets.
+/// Returns targets × features.
 fn stlsq(
-    x: &DMatrix<f64>,
-    y: &DMatrix<f64>,
+    gram: &DMatrix<f64>,
+    xty: &DMatrix<f64>,
     init: &DMatrix<f64>,
     threshold: f64,
     alpha: f64,
     max_iter: usize,
 ) -> (DMatrix<f64>, usize, bool) {
-    let p = x.ncols();
-    let t = y.ncols();
-    let gram = x.transpose() * x;
-    let xty = x.transpose() * y;
+    let p = gram.ncols();
+    let t = xty.ncols();
     let mut ind = vec![vec![true; p]; t];
     let n_selected0 = t * p;
     // Non-zero pattern of the previous history entry (the lstsq guess first).
@@ -410,11 +467,11 @@ fn stlsq(
     (optvar, iterations, converged)
 }
 
-/// `SR3._reduce` (no trimming). `init`: features × targets. Returns targets × features.
+/// `SR3._reduce` (no trimming) on the normal equations (`gram` = XᵀX, `xty` = XᵀY). `init`: features × targets. Returns targets × features.
 #[allow(clippy::too_many_arguments)]
 fn sr3(
-    x: &DMatrix<f64>,
-    y: &DMatrix<f64>,
+    gram: &DMatrix<f64>,
+    xty: &DMatrix<f64>,
     init: &DMatrix<f64>,
     regularizer: Regularizer,
     lam: f64,
@@ -422,12 +479,11 @@ fn sr3(
     max_iter: usize,
     tol: f64,
 ) -> (DMatrix<f64>, usize, bool) {
-    let p = x.ncols();
-    let mut a = x.transpose() * x;
+    let p = gram.ncols();
+    let mut a = gram.clone();
     for j in 0..p {
         a[(j, j)] += 1.0 / nu;
     }
-    let xty = x.transpose() * y;
     let chol = a.clone().cholesky();
     let weight = lam * nu;
     let prox = |v: f64| -> f64 {
@@ -446,7 +502,7 @@ fn sr3(
     let mut iterations = 0;
     let mut converged = false;
     for _ in 0..max_iter {
-        let rhs = &xty + &sparse / nu;
+        let rhs = xty + &sparse / nu;
         let full = match &chol {
             Some(c) => c.solve(&rhs),
             None => solve_spd(a.clone(), &rhs),
