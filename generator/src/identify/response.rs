@@ -602,6 +602,11 @@ struct LibraryState {
     place: Vec<Vec<(usize, usize)>>,
     /// Per input channel: the library columns whose term uses it.
     uses: [Vec<usize>; 4],
+    /// Per library column of the form m(x)·u_j (u_j to the first power, last or with one other
+    /// factor): per segment, per used row, m at the interval's two ends (at the sample only, for
+    /// derivative targets); `None` for other columns. The term is then m·u_j, the same product
+    /// [`eval_term`] forms, without evaluating m (a sine, a cosine) again for every candidate.
+    multiplier: Vec<Option<Vec<Vec<[f64; 2]>>>>,
 }
 
 impl LibraryState {
@@ -622,7 +627,7 @@ impl LibraryState {
                     .collect()
             })
             .collect();
-        let uses = core::array::from_fn(|j| {
+        let uses: [Vec<usize>; 4] = core::array::from_fn(|j| {
             lib.library
                 .terms
                 .iter()
@@ -649,6 +654,45 @@ impl LibraryState {
             }
         }
         let gram = z.iter().map(|m| m.tr_mul(m)).collect();
+        let multiplier = (0..lib.library.len())
+            .map(|c| {
+                let t = &lib.library.terms[c];
+                let j = (0..4).find(|j| uses[*j].contains(&c))?;
+                let at = t
+                    .factors
+                    .iter()
+                    .position(|&(b, _)| b == crate::model::Base::Var(12 + j))?;
+                let simple = t.factors[at].1 == 1
+                    && (t.factors.len() <= 2 || at + 1 == t.factors.len())
+                    && (0..4).filter(|i| uses[*i].contains(&c)).count() == 1;
+                if !simple {
+                    return None;
+                }
+                Some(
+                    sc.segments
+                        .iter()
+                        .zip(&sc.folded.rows)
+                        .map(|(s, rows)| {
+                            rows.iter()
+                                .map(|&(k, _)| {
+                                    let mut v = [0.0; 16];
+                                    v[..12].copy_from_slice(&s.x[k]);
+                                    v[12 + j] = 1.0;
+                                    let m0 = eval_term(t, &v);
+                                    let m1 = if s.interval() {
+                                        v[..12].copy_from_slice(&s.x_next[k]);
+                                        eval_term(t, &v)
+                                    } else {
+                                        0.0
+                                    };
+                                    [m0, m1]
+                                })
+                                .collect()
+                        })
+                        .collect(),
+                )
+            })
+            .collect();
         Self {
             row,
             resp: *r,
@@ -657,6 +701,7 @@ impl LibraryState {
             gram,
             place,
             uses,
+            multiplier,
         }
     }
 
@@ -707,16 +752,32 @@ impl LibraryState {
                 }
             }
         }
-        for ((s, rows), (u, at)) in sc
+        for (si, ((s, rows), (u, at))) in sc
             .segments
             .iter()
             .zip(&sc.folded.rows)
             .zip(self.inputs.iter().zip(&self.place))
+            .enumerate()
         {
-            for (&(k, _), &(f, i)) in rows.iter().zip(at) {
-                let m = &mut self.z[f];
-                for &c in &cols {
-                    m[(i, c)] = s.term(&lib.library.terms[c], k, &u[k]);
+            for &c in &cols {
+                let t = &lib.library.terms[c];
+                let j = (0..4).find(|j| self.uses[*j].contains(&c)).unwrap_or(0);
+                match &self.multiplier[c] {
+                    Some(mult) => {
+                        for ((&(k, _), &(f, i)), m) in rows.iter().zip(at).zip(&mult[si]) {
+                            let uj = u[k][j];
+                            self.z[f][(i, c)] = if s.interval() {
+                                0.5 * (m[0] * uj + m[1] * uj)
+                            } else {
+                                m[0] * uj
+                            };
+                        }
+                    }
+                    None => {
+                        for (&(k, _), &(f, i)) in rows.iter().zip(at) {
+                            self.z[f][(i, c)] = s.term(t, k, &u[k]);
+                        }
+                    }
                 }
             }
         }
