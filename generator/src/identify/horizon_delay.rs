@@ -250,6 +250,17 @@ fn slice(seg: &Segment, a: usize, b: usize) -> Segment {
 mod tests {
     use super::*;
 
+    #[test]
+    fn scored_runs_start_every_five_hundredths_of_a_second() {
+        assert_eq!(score_stride(1.0 / 30.0), 1);
+        assert_eq!(score_stride(1.0 / 20.0), 1);
+        assert_eq!(score_stride(1.0 / 50.0), 2);
+        assert_eq!(score_stride(0.01), 5);
+        assert_eq!(score_stride(1.0 / 1000.0), 50);
+        assert_eq!(score_stride(0.0), 1);
+        assert_eq!(score_stride(f64::NAN), 1);
+    }
+
     const DT: f64 = 1.0 / 30.0;
 
     #[test]
