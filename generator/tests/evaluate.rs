@@ -465,7 +465,7 @@ fn horizon_score_is_evaluates_horizon() {
             s[0] = tk;
             s[2] = FLYING + 0.3 * tk;
             s[5] = 0.2 * tk;
-            s[6] = 1.0 + 0.1 * (tk).sin();
+            s[6] = 1.0 + 0.1 * tk.sin();
             s[8] = 0.3;
             s[11] = 0.2;
             s
