@@ -449,3 +449,63 @@ fn m100_run7() {
         assert_eq!(e.horizon.runs, 1801 - 30);
     }
 }
+
+/// `horizon_score` (the delay refinement's score) is `evaluate`'s horizon figures, the same numbers
+/// at stride 1, and every `stride`-th run otherwise (here on a flight whose runs all diverge at a
+/// known rate, and on one model that tracks a climbing, turning log).
+#[test]
+fn horizon_score_is_evaluates_horizon() {
+    use uavgen::evaluate::horizon_score;
+    let (dt, n) = (0.05, 200usize);
+    let t: Vec<String> = (0..n).map(|k| format!("{:.2}", k as f64 * dt)).collect();
+    let x: Vec<[f64; 12]> = (0..n)
+        .map(|k| {
+            let tk = k as f64 * dt;
+            let mut s = [0.0; 12];
+            s[0] = tk;
+            s[2] = FLYING + 0.3 * tk;
+            s[5] = 0.2 * tk;
+            s[6] = 1.0 + 0.1 * tk.sin();
+            s[8] = 0.3;
+            s[11] = 0.2;
+            s
+        })
+        .collect();
+    let u: Vec<[f64; 4]> = (0..n).map(|k| [0.3, 0.0, 0.0, 0.1 * (k % 7) as f64]).collect();
+    let log = log_from(&t, &x, &u, "turn.csv");
+    let models = [
+        sindy("unstable", &["vx^2"], &[("vx", "vx^2", 1.0)]),
+        sindy(
+            "loops",
+            &["vx", "vz", "u_vz", "yaw_rate", "u_yaw_rate"],
+            &[
+                ("vx", "vx", -0.2),
+                ("vz", "vz", -2.0),
+                ("vz", "u_vz", 2.0),
+                ("yaw_rate", "yaw_rate", -3.0),
+                ("yaw_rate", "u_yaw_rate", 3.0),
+            ],
+        ),
+    ];
+    let options = EvaluateOptions {
+        horizon: 30,
+        ..Default::default()
+    };
+    for model in &models {
+        let e = evaluate(model, std::slice::from_ref(&log), &options).unwrap();
+        let s = horizon_score(model, std::slice::from_ref(&log), &options, 1).unwrap();
+        assert_eq!(s.runs, e.horizon.runs, "{}", model.name);
+        assert_eq!(s.diverged, e.horizon.diverged, "{}", model.name);
+        assert_eq!(
+            s.overall_rmse.map(f64::to_bits),
+            e.horizon.metrics.as_ref().map(|m| m.overall_rmse.to_bits()),
+            "{}",
+            model.name
+        );
+        let every3 = horizon_score(model, std::slice::from_ref(&log), &options, 3).unwrap();
+        assert_eq!(every3.runs, (n - 30).div_ceil(3), "{}", model.name);
+        assert!(every3.overall_rmse.unwrap().is_finite());
+    }
+    let short = log_from(&t[..10], &x[..10], &u[..10], "short.csv");
+    assert!(horizon_score(&models[1], &[short], &options, 1).is_err());
+}

@@ -2,7 +2,7 @@
 
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use uavgen::evaluate::{evaluate, EvaluateOptions};
+use uavgen::evaluate::{horizon_score, EvaluateOptions};
 use uavgen::identify::bounded_selection::select_bounded_with;
 use uavgen::identify::dataset::{build, DatasetOptions, Targets};
 use uavgen::identify::excitation::{self, Excitation, ExcitationOptions};
@@ -806,12 +806,14 @@ fn refine_delays(
         stale: args.stale,
         ..EvaluateOptions::default()
     };
-    // Per split: the held-out horizon RMSE of the model refitted with `r`.
+    // Per split: the held-out horizon RMSE of the model refitted with `r` (free runs every
+    // `stride`-th sample, horizon_delay::SCORE_SPACING_S).
+    let stride = horizon_delay::score_stride(dt);
     let split_rmse = |r: &InputResponse, (train, test): &(Vec<_>, Vec<_>)| -> Option<f64> {
         let model = candidate_model(args, train, r, savgol, targets, ex)?;
-        let e = evaluate(&model, test, &evaluate_options).ok()?;
+        let e = horizon_score(&model, test, &evaluate_options, stride).ok()?;
         // A candidate whose free runs diverge is not a better model, whatever its finite runs say.
-        (e.horizon.diverged == 0).then_some(e.horizon.metrics?.overall_rmse)
+        (e.diverged == 0).then_some(e.overall_rmse?)
     };
     // The worse split's RMSE relative to the start's (the first call scores the start).
     let mut reference: Option<Vec<f64>> = None;
@@ -826,9 +828,10 @@ fn refine_delays(
     match &refined {
         Some(r) => {
             eprintln!(
-                "  delays refined over the horizon (model refitted on {:.0} % of every segment, free runs of {} samples on the rest, its first and its last part in turn; score: the worse part's overall RMSE relative to the one-step delays'): {:.3} -> {:.3}",
+                "  delays refined over the horizon (model refitted on {:.0} % of every segment, free runs of {} samples starting {} sample(s) apart on the rest, its first and its last part in turn; score: the worse part's overall RMSE relative to the one-step delays'): {:.3} -> {:.3}",
                 100.0 * options.train_share,
                 evaluate_options.horizon,
+                stride,
                 r.before,
                 r.after
             );

@@ -662,6 +662,96 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
     })
 }
 
+/// What [`horizon_score`] gives: the pooled horizon free runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HorizonScore {
+    pub runs: usize,
+    pub diverged: usize,
+    /// Overall RMSE of every finite prediction of every run (all states pooled).
+    pub overall_rmse: Option<f64>,
+}
+
+/// The horizon free runs of [`evaluate`] alone, from every `stride`-th sample of each segment
+/// (the first included): with `stride` 1 the runs, divergences and overall RMSE of
+/// `evaluate(model, logs, options)?.horizon`, the same numbers, without the one-step and
+/// whole-flight figures (the delay refinement of `identify` scores candidates by this alone, and
+/// free runs that start a few milliseconds apart are nearly the same run). It fails where
+/// `evaluate` does for the horizon's reasons (no logs, a model of other dimensions, no run to
+/// score); on logs whose other figures `evaluate` cannot compute it still answers.
+pub fn horizon_score(
+    model: &Model,
+    logs: &[FlightLog],
+    options: &EvaluateOptions,
+    stride: usize,
+) -> Result<HorizonScore, EvaluateError> {
+    if logs.is_empty() {
+        return Err(EvaluateError::NoLogs);
+    }
+    let logs: Vec<FlightLog> = logs.iter().map(|l| l.with_stale(options.stale)).collect();
+    let logs = logs.as_slice();
+    let mut st = Stepper::new(model, options)?;
+    let names = model.base_states().to_vec();
+    let h = options.horizon;
+    let stride = stride.max(1);
+    let mut pool = Pool::default();
+    let (mut runs, mut diverged, mut on_ground_runs, mut next_made) = (0usize, 0usize, 0usize, 0usize);
+    for log in logs {
+        for (si, seg) in log.segments.iter().enumerate() {
+            let n = seg.len();
+            let Some(dt) = segment_dt(seg) else {
+                continue;
+            };
+            let m = st.substeps(dt, &log.source, si)?;
+            next_made += n - 1;
+            let inputs = ModelInputs::new(model, &st.ir, &seg.t, &seg.x, &seg.u, seg.t[0], dt);
+            let ground = on_ground(&seg.x);
+            for k in (0..n.saturating_sub(h)).step_by(stride) {
+                if run_touches_ground(&ground, k, h) {
+                    on_ground_runs += 1;
+                    continue;
+                }
+                runs += 1;
+                let pred = horizon_run(&st, seg, &inputs, k, h, dt, m);
+                for (j, p) in pred.iter().enumerate() {
+                    pool.push(p, &seg.x[k + j + 1], Some(YAW));
+                }
+                if pred.len() < h {
+                    diverged += 1;
+                }
+            }
+        }
+    }
+    let files = || logs.iter().map(|l| l.source.as_str()).collect::<Vec<_>>().join(", ");
+    if next_made == 0 {
+        return Err(EvaluateError::TooShort { files: files() });
+    }
+    if runs == 0 && on_ground_runs > 0 {
+        return Err(EvaluateError::AllOnGround {
+            files: files(),
+            horizon: h,
+            runs: on_ground_runs,
+        });
+    }
+    if runs == 0 {
+        let longest = logs
+            .iter()
+            .flat_map(|l| &l.segments)
+            .map(|s| s.len())
+            .max()
+            .unwrap_or(0);
+        return Err(EvaluateError::HorizonTooLong {
+            files: files(),
+            horizon: h,
+            longest,
+        });
+    }
+    Ok(HorizonScore {
+        runs,
+        diverged,
+        overall_rmse: pool.metrics(&names)?.map(|m| m.overall_rmse),
+    })
+}
+
 /// Measured and predicted trajectories of one segment, for plots.
 #[derive(Clone, Debug)]
 pub struct SegmentTraces {

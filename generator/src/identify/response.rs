@@ -546,34 +546,6 @@ impl LibraryScan {
         Self { library }
     }
 
-    /// Per-fold Gram matrices of [Θ, y] for `row` with the inputs of `r`.
-    fn grams(&self, sc: &Scanner, r: &InputResponse, row: usize) -> Vec<DMatrix<f64>> {
-        let p = self.library.len() + 1;
-        let folds = sc.folded.folds;
-        let mut per_fold: Vec<Vec<f64>> = vec![Vec::new(); folds];
-        for (s, rows) in sc.segments.iter().zip(&sc.folded.rows) {
-            if rows.is_empty() {
-                continue;
-            }
-            let u = s.inputs(r);
-            for &(k, f) in rows {
-                let out = &mut per_fold[f];
-                for t in &self.library.terms {
-                    out.push(s.term(t, k, &u[k]));
-                }
-                out.push(s.dx[k][row]);
-            }
-        }
-        per_fold
-            .into_iter()
-            .map(|data| {
-                let n = data.len() / p;
-                let z = DMatrix::from_row_slice(n, p, &data);
-                z.tr_mul(&z)
-            })
-            .collect()
-    }
-
     fn solve(total: &DMatrix<f64>) -> DVector<f64> {
         let p = total.nrows() - 1;
         let a = total.view((0, 0), (p, p));
@@ -619,33 +591,255 @@ impl LibraryScan {
         sse
     }
 
-    /// The all-data residuals' effective sample count.
-    fn n_eff(&self, sc: &Scanner, r: &InputResponse, row: usize) -> f64 {
-        let grams = self.grams(sc, r, row);
-        let mut total = grams[0].clone() * 0.0;
-        for g in &grams {
+    /// The all-data residuals' effective sample count (`state` set to the response first).
+    fn n_eff(&self, state: &mut LibraryState, sc: &Scanner, r: &InputResponse) -> f64 {
+        state.set(sc, self, r);
+        let mut total = state.gram[0].clone() * 0.0;
+        for g in &state.gram {
             total += g;
         }
         let theta = Self::solve(&total);
-        let mut residuals = Vec::new();
-        for (s, rows) in sc.segments.iter().zip(&sc.folded.rows) {
-            let u = s.inputs(r);
-            let e: Vec<f64> = rows
-                .iter()
-                .map(|&(k, _)| {
-                    let fit: f64 = self
-                        .library
-                        .terms
-                        .iter()
-                        .zip(theta.iter())
-                        .map(|(t, c)| c * s.term(t, k, &u[k]))
-                        .sum();
-                    s.dx[k][row] - fit
-                })
-                .collect();
-            residuals.push(e);
-        }
+        let terms = theta.len();
+        let residuals: Vec<Vec<f64>> = state
+            .place
+            .iter()
+            .map(|rows| {
+                rows.iter()
+                    .map(|&(f, i)| {
+                        let z = &state.z[f];
+                        let fit: f64 = (0..terms).map(|c| theta[c] * z[(i, c)]).sum();
+                        z[(i, terms)] - fit
+                    })
+                    .collect()
+            })
+            .collect();
         effective_count(&residuals)
+    }
+}
+
+/// The per-fold library matrices [Θ, y] of one driven row (fold f's rows in segment order) and
+/// their Gram matrices, for the input response `resp`.
+///
+/// The scan tries one channel's delays and lags at a time, and only the library terms of that
+/// input change with them (for u_roll 11 of the 67 columns): [`LibraryState::set`] recomputes
+/// those columns and their rows and columns of the Gram matrices, each entry the same dot product
+/// of two columns that `tr_mul` computes, so the matrices are the same numbers as rebuilding
+/// everything for every candidate, at a sixth of the cost.
+struct LibraryState {
+    /// The target's state index.
+    row: usize,
+    resp: InputResponse,
+    /// Per segment: the inputs of `resp` (what [`ScanSegment::inputs`] gives).
+    inputs: Vec<Vec<[f64; 4]>>,
+    /// Per fold: samples × (terms + 1), the last column the target.
+    z: Vec<DMatrix<f64>>,
+    gram: Vec<DMatrix<f64>>,
+    /// Per segment, per used row: (fold, row of that fold's matrix).
+    place: Vec<Vec<(usize, usize)>>,
+    /// Per input channel: the library columns whose term uses it.
+    uses: [Vec<usize>; 4],
+    /// Per library column of the form m(x)·u_j (u_j to the first power, last or with one other
+    /// factor): per segment, per used row, m at the interval's two ends (at the sample only, for
+    /// derivative targets); `None` for other columns. The term is then m·u_j, the same product
+    /// [`eval_term`] forms, without evaluating m (a sine, a cosine) again for every candidate.
+    multiplier: Vec<Option<Vec<Vec<[f64; 2]>>>>,
+}
+
+impl LibraryState {
+    fn new(lib: &LibraryScan, sc: &Scanner, r: &InputResponse, row: usize) -> Self {
+        let p = lib.library.len() + 1;
+        let folds = sc.folded.folds;
+        let mut counts = vec![0usize; folds];
+        let place: Vec<Vec<(usize, usize)>> = sc
+            .folded
+            .rows
+            .iter()
+            .map(|rows| {
+                rows.iter()
+                    .map(|&(_, f)| {
+                        counts[f] += 1;
+                        (f, counts[f] - 1)
+                    })
+                    .collect()
+            })
+            .collect();
+        let uses: [Vec<usize>; 4] = core::array::from_fn(|j| {
+            lib.library
+                .terms
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| {
+                    t.factors.iter().any(|&(b, _)| match b {
+                        crate::model::Base::Var(v) | crate::model::Base::Sin(v) | crate::model::Base::Cos(v) => {
+                            v == 12 + j
+                        }
+                    })
+                })
+                .map(|(c, _)| c)
+                .collect()
+        });
+        let inputs: Vec<Vec<[f64; 4]>> = sc.segments.iter().map(|s| s.inputs(r)).collect();
+        let mut z: Vec<DMatrix<f64>> = counts.iter().map(|&n| DMatrix::zeros(n, p)).collect();
+        for ((s, rows), (u, at)) in sc.segments.iter().zip(&sc.folded.rows).zip(inputs.iter().zip(&place)) {
+            for (&(k, _), &(f, i)) in rows.iter().zip(at) {
+                let m = &mut z[f];
+                for (c, t) in lib.library.terms.iter().enumerate() {
+                    m[(i, c)] = s.term(t, k, &u[k]);
+                }
+                m[(i, p - 1)] = s.dx[k][row];
+            }
+        }
+        let gram = z.iter().map(|m| m.tr_mul(m)).collect();
+        let multiplier = (0..lib.library.len())
+            .map(|c| {
+                let t = &lib.library.terms[c];
+                let j = (0..4).find(|j| uses[*j].contains(&c))?;
+                let at = t
+                    .factors
+                    .iter()
+                    .position(|&(b, _)| b == crate::model::Base::Var(12 + j))?;
+                let simple = t.factors[at].1 == 1
+                    && (t.factors.len() <= 2 || at + 1 == t.factors.len())
+                    && (0..4).filter(|i| uses[*i].contains(&c)).count() == 1;
+                if !simple {
+                    return None;
+                }
+                Some(
+                    sc.segments
+                        .iter()
+                        .zip(&sc.folded.rows)
+                        .map(|(s, rows)| {
+                            rows.iter()
+                                .map(|&(k, _)| {
+                                    let mut v = [0.0; 16];
+                                    v[..12].copy_from_slice(&s.x[k]);
+                                    v[12 + j] = 1.0;
+                                    let m0 = eval_term(t, &v);
+                                    let m1 = if s.interval() {
+                                        v[..12].copy_from_slice(&s.x_next[k]);
+                                        eval_term(t, &v)
+                                    } else {
+                                        0.0
+                                    };
+                                    [m0, m1]
+                                })
+                                .collect()
+                        })
+                        .collect(),
+                )
+            })
+            .collect();
+        Self {
+            row,
+            resp: *r,
+            inputs,
+            z,
+            gram,
+            place,
+            uses,
+            multiplier,
+        }
+    }
+
+    /// Make the target column that of state `row`.
+    fn set_row(&mut self, sc: &Scanner, row: usize) {
+        if row == self.row {
+            return;
+        }
+        for ((s, rows), at) in sc.segments.iter().zip(&sc.folded.rows).zip(&self.place) {
+            for (&(k, _), &(f, i)) in rows.iter().zip(at) {
+                let m = &mut self.z[f];
+                let c = m.ncols() - 1;
+                m[(i, c)] = s.dx[k][row];
+            }
+        }
+        for (m, g) in self.z.iter().zip(self.gram.iter_mut()) {
+            let a = m.ncols() - 1;
+            for b in 0..m.ncols() {
+                let v = m.column(a).dot(&m.column(b));
+                g[(a, b)] = v;
+                g[(b, a)] = v;
+            }
+        }
+        self.row = row;
+    }
+
+    /// Make the matrices those of the response `r` (see the type's documentation).
+    fn set(&mut self, sc: &Scanner, lib: &LibraryScan, r: &InputResponse) {
+        let changed: Vec<usize> = (0..4)
+            .filter(|&j| r.delay[j] != self.resp.delay[j] || r.lag[j] != self.resp.lag[j])
+            .collect();
+        if changed.is_empty() {
+            return;
+        }
+        let mut cols: Vec<usize> = changed.iter().flat_map(|&j| self.uses[j].iter().copied()).collect();
+        cols.sort_unstable();
+        cols.dedup();
+        for (s, (u, rows)) in sc.segments.iter().zip(self.inputs.iter_mut().zip(&sc.folded.rows)) {
+            if rows.is_empty() {
+                continue;
+            }
+            let offset = if s.interval() { 0.0 } else { 0.5 };
+            for &j in &changed {
+                let col: Vec<f64> = s.u.iter().map(|v| v[j]).collect();
+                let seen = interval_average(&col, s.dt, r.delay[j] + offset * s.dt, r.lag[j]);
+                for (o, v) in u.iter_mut().zip(seen) {
+                    o[j] = v;
+                }
+            }
+        }
+        for (si, ((s, rows), (u, at))) in sc
+            .segments
+            .iter()
+            .zip(&sc.folded.rows)
+            .zip(self.inputs.iter().zip(&self.place))
+            .enumerate()
+        {
+            for &c in &cols {
+                let t = &lib.library.terms[c];
+                let j = (0..4).find(|j| self.uses[*j].contains(&c)).unwrap_or(0);
+                match &self.multiplier[c] {
+                    Some(mult) => {
+                        for ((&(k, _), &(f, i)), m) in rows.iter().zip(at).zip(&mult[si]) {
+                            let uj = u[k][j];
+                            self.z[f][(i, c)] = if s.interval() {
+                                0.5 * (m[0] * uj + m[1] * uj)
+                            } else {
+                                m[0] * uj
+                            };
+                        }
+                    }
+                    None => {
+                        for (&(k, _), &(f, i)) in rows.iter().zip(at) {
+                            self.z[f][(i, c)] = s.term(t, k, &u[k]);
+                        }
+                    }
+                }
+            }
+        }
+        let mut updated = vec![false; self.z.first().map_or(0, |m| m.ncols())];
+        for (m, g) in self.z.iter().zip(self.gram.iter_mut()) {
+            updated.iter_mut().for_each(|u| *u = false);
+            for &a in &cols {
+                updated[a] = true;
+                for b in 0..m.ncols() {
+                    // (b, a) of an updated b is already there: the same products summed the same way.
+                    if b != a && updated[b] {
+                        continue;
+                    }
+                    let v = m.column(a).dot(&m.column(b));
+                    g[(a, b)] = v;
+                    g[(b, a)] = v;
+                }
+            }
+        }
+        self.resp = *r;
+    }
+
+    /// The per-fold Gram matrices of [Θ, y] with the inputs of `r`.
+    fn grams(&mut self, sc: &Scanner, lib: &LibraryScan, r: &InputResponse) -> &[DMatrix<f64>] {
+        self.set(sc, lib, r);
+        &self.gram
     }
 }
 
@@ -739,6 +933,7 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
 
     let mut cur = InputResponse::default();
     let mut channels: Vec<Option<ChannelEstimate>> = vec![None; 4];
+    let state = std::cell::RefCell::new(LibraryState::new(&lib, &sc, &cur, DRIVEN_ROW[0]));
     for _pass in 0..options.passes.max(1) {
         for j in 0..4 {
             let row = DRIVEN_ROW[j];
@@ -746,8 +941,10 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
                 channels[j] = Some(silent_channel(j));
                 continue;
             }
-            let score =
-                |d: f64, l: Option<f64>| LibraryScan::cv_sse(&lib.grams(&sc, &with_channel(&cur, j, d, l), row));
+            state.borrow_mut().set_row(&sc, row);
+            let score = |d: f64, l: Option<f64>| {
+                LibraryScan::cv_sse(state.borrow_mut().grams(&sc, &lib, &with_channel(&cur, j, d, l)))
+            };
             // Delays without a lag.
             let curve: Vec<(f64, f64)> = delays.iter().map(|&d| (d, score(d, None))).collect();
             let sse0 = curve[0].1;
@@ -756,7 +953,7 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
                 .copied()
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .unwrap_or((0.0, sse0));
-            let n_eff = lib.n_eff(&sc, &with_channel(&cur, j, d_best, None), row);
+            let n_eff = lib.n_eff(&mut state.borrow_mut(), &sc, &with_channel(&cur, j, d_best, None));
             let evidence = n_eff * (sse0 / sse_best).ln();
             let mut note = None;
             let mut refused = None;
@@ -1050,6 +1247,49 @@ mod tests {
         assert_eq!(samples(1.0, 0.01), 100);
         assert_eq!(samples(1.0 / 15.0, 1.0 / 30.0), 2);
         assert_eq!(samples(0.0, 0.01), 1);
+    }
+
+    /// The scan's incremental update (only one channel's columns and Gram rows recomputed) gives
+    /// the same matrices, bit for bit, as building them afresh for the response; derivative and
+    /// integral form, with delays and a lag.
+    #[test]
+    fn updated_library_matrices_are_the_rebuilt_ones() {
+        for seg in [
+            synthetic([0.1, 0.05, 0.0, 0.2], 8.0, 3),
+            interval_form(synthetic([0.1, 0.05, 0.0, 0.2], 8.0, 4)),
+        ] {
+            let segments = [seg];
+            let options = ScanOptions::default();
+            let (folded, _) = fold_rows(&segments, &options);
+            let sc = Scanner {
+                segments: &segments,
+                folded,
+                options: &options,
+            };
+            let lib = LibraryScan::new(&[]);
+            let mut state = LibraryState::new(&lib, &sc, &InputResponse::default(), 9);
+            let steps = [
+                (1, 0.05, None),
+                (1, 0.0625, Some(0.04)),
+                (3, 0.2, None),
+                (0, 0.1, Some(0.1)),
+            ];
+            let mut r = InputResponse::default();
+            for (j, d, l) in steps {
+                r = with_channel(&r, j, d, l);
+                for row in [9, 8] {
+                    state.set_row(&sc, row);
+                    let grams: Vec<DMatrix<f64>> = state.grams(&sc, &lib, &r).to_vec();
+                    let fresh = LibraryState::new(&lib, &sc, &r, row);
+                    for (a, b) in grams.iter().zip(&fresh.gram) {
+                        assert!(a.iter().zip(b.iter()).all(|(x, y)| x.to_bits() == y.to_bits()));
+                    }
+                    for (a, b) in state.z.iter().zip(&fresh.z) {
+                        assert!(a.iter().zip(b.iter()).all(|(x, y)| x.to_bits() == y.to_bits()));
+                    }
+                }
+            }
+        }
     }
 
     #[test]

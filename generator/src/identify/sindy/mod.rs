@@ -353,10 +353,13 @@ pub fn fit_with_progress(
             v.clone()
         }
     };
+    // The normalised library, the initial guess and the normal equations are the same for every
+    // sweep value: computed once (optimizer::Prepared; the same numbers as regress per value).
+    let mut prepared = optimizer::Prepared::new(&theta, &y, options.normalize_columns)?;
     let mut regressions = Vec::with_capacity(values_to_try.len());
     for &value in &values_to_try {
         let opt = options.optimizer.with_sparsity(value);
-        regressions.push(regress(&theta, &y, &opt, options.normalize_columns)?);
+        regressions.push(prepared.regress(&opt)?);
         progress(regressions.len(), values_to_try.len());
     }
     // N of the criteria, per row, from the densest fit (most non-zero coefficients).

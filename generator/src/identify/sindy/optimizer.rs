@@ -4,7 +4,8 @@
 //! `pysindy.optimizers.SR3` do in `BaseOptimizer.fit` (PySINDy 2.1.0):
 //!
 //! 1. if `normalize_columns`, every column of Θ is divided by its 2-norm;
-//! 2. the initial guess is the (minimum-norm) least-squares solution `lstsq(Θ, Ẏ)`;
+//! 2. the initial guess is the (minimum-norm) least-squares solution `lstsq(Θ, Ẏ)` (STLSQ looks
+//!    only at its non-zero pattern, taken from the normal equations: [`Prepared`]);
 //! 3. the optimiser's `_reduce` runs (see [`stlsq`] and [`sr3`] in the docs of [`Optimizer`]);
 //! 4. the support is `|ξ| > 1e-14`; with `unbias` the support is refitted by plain least squares;
 //! 5. with `normalize_columns`, the coefficients are divided by the column norms (back to the units of Θ).
@@ -220,79 +221,165 @@ pub fn regress(
     normalize_columns: bool,
 ) -> Result<Regression, OptimizerError> {
     optimizer.validate()?;
-    if theta.nrows() != y.nrows() {
-        return Err(OptimizerError::Shape(theta.nrows(), y.nrows()));
-    }
-    if theta.nrows() == 0 {
-        return Err(OptimizerError::Empty);
-    }
-    if theta.iter().chain(y.iter()).any(|v| !v.is_finite()) {
-        return Err(OptimizerError::NonFinite);
-    }
-    let p = theta.ncols();
-    let mut x = theta.clone();
-    let mut norms = DVector::from_element(p, 1.0);
-    if normalize_columns {
-        for j in 0..p {
-            let n = x.column(j).norm();
-            if n == 0.0 {
-                return Err(OptimizerError::ZeroColumn(j));
+    Prepared::new(theta, y, normalize_columns)?.regress(optimizer)
+}
+
+/// What every regression on one (Θ, Ẏ) shares, computed once: the normalised Θ and its column
+/// norms, the least-squares initial guess (its non-zero pattern for STLSQ), ΘᵀΘ and ΘᵀẎ, and the
+/// unbiasing refits by support.
+///
+/// A sparsity sweep regresses the same data with many thresholds; each of these is a pass over
+/// all N samples (the QR factorisation of the initial guess alone costs 2Np² flops), and several
+/// thresholds give a row the same support, hence the same unbiased refit. [`Prepared::regress`]
+/// computes these once per data set instead of once per sweep value, each by the same operations
+/// in the same order (so the same bits); STLSQ takes its initial guess's non-zero pattern from the
+/// normal equations ([`Prepared::init_pattern`], the same pattern).
+pub struct Prepared {
+    x: DMatrix<f64>,
+    y: DMatrix<f64>,
+    norms: DVector<f64>,
+    normalize_columns: bool,
+    /// The least-squares initial guess: SR3 starts from it; STLSQ only compares its non-zero
+    /// pattern with the first pass's (see [`Prepared::init_pattern`]). Computed when first needed.
+    init: Option<DMatrix<f64>>,
+    /// STLSQ's view of the initial guess: its non-zero pattern.
+    pattern: Option<DMatrix<f64>>,
+    gram: DMatrix<f64>,
+    xty: DMatrix<f64>,
+    /// The unbiased refit of target t on a support (the normalised columns' coefficients).
+    unbiased: std::collections::HashMap<(usize, Vec<usize>), Vec<f64>>,
+}
+
+impl Prepared {
+    /// Check the data and compute the shared parts (see the type's documentation).
+    pub fn new(theta: &DMatrix<f64>, y: &DMatrix<f64>, normalize_columns: bool) -> Result<Self, OptimizerError> {
+        if theta.nrows() != y.nrows() {
+            return Err(OptimizerError::Shape(theta.nrows(), y.nrows()));
+        }
+        if theta.nrows() == 0 {
+            return Err(OptimizerError::Empty);
+        }
+        if theta.iter().chain(y.iter()).any(|v| !v.is_finite()) {
+            return Err(OptimizerError::NonFinite);
+        }
+        let p = theta.ncols();
+        let mut x = theta.clone();
+        let mut norms = DVector::from_element(p, 1.0);
+        if normalize_columns {
+            for j in 0..p {
+                let n = x.column(j).norm();
+                if n == 0.0 {
+                    return Err(OptimizerError::ZeroColumn(j));
+                }
+                norms[j] = n;
+                x.column_mut(j).unscale_mut(n);
             }
-            norms[j] = n;
-            x.column_mut(j).unscale_mut(n);
         }
+        let gram = x.transpose() * &x;
+        let xty = x.transpose() * y;
+        Ok(Self {
+            x,
+            y: y.clone(),
+            norms,
+            normalize_columns,
+            init: None,
+            pattern: None,
+            gram,
+            xty,
+            unbiased: std::collections::HashMap::new(),
+        })
     }
-    // Initial guess: lstsq(x, y), features × targets.
-    let init = lstsq(&x, y);
-    let (mut coef, iterations, converged, unbias) = match *optimizer {
-        Optimizer::Stlsq {
-            threshold,
-            alpha,
-            max_iter,
-            unbias,
-        } => {
-            let (c, it, conv) = stlsq(&x, y, &init, threshold, alpha, max_iter);
-            (c, it, conv, unbias)
-        }
-        Optimizer::Sr3 {
-            regularizer,
-            reg_weight_lam,
-            relax_coeff_nu,
-            max_iter,
-            tol,
-            unbias,
-        } => {
-            let (c, it, conv) = sr3(&x, y, &init, regularizer, reg_weight_lam, relax_coeff_nu, max_iter, tol);
-            (c, it, conv, unbias)
-        }
-    };
-    if unbias {
-        for t in 0..coef.nrows() {
-            let support: Vec<usize> = (0..p).filter(|&j| coef[(t, j)].abs() > 1e-14).collect();
-            let mut row = vec![0.0; p];
-            if !support.is_empty() {
-                let xs = x.select_columns(&support);
-                let ys = DMatrix::from_column_slice(y.nrows(), 1, y.column(t).as_slice());
-                let w = lstsq(&xs, &ys);
-                for (k, &j) in support.iter().enumerate() {
-                    row[j] = w[(k, 0)];
+
+    /// The initial guess lstsq(x, y), features × targets (Householder QR: 2Np² flops).
+    fn init(&mut self) -> &DMatrix<f64> {
+        let (x, y) = (&self.x, &self.y);
+        self.init.get_or_insert_with(|| lstsq(x, y))
+    }
+
+    /// What STLSQ needs of the initial guess: which entries are non-zero. `STLSQ._reduce` uses the
+    /// guess only to ask whether the first pass changed the support (its history's first entry),
+    /// so the pattern is taken from the least-squares solution of the normal equations already at
+    /// hand (a Cholesky solve, p³/3 flops) instead of the QR factorisation of the N × p library.
+    /// The two solve the same problem; an entry of a least-squares solution is exactly zero only
+    /// for a target column that is exactly zero, where both give zeros. And when no entry of the
+    /// guess is zero the pattern cannot change the result: the first pass either keeps every
+    /// term (converged either way) or drops one (then it differs from the guess's pattern either way).
+    fn init_pattern(&mut self) -> &DMatrix<f64> {
+        let (gram, xty) = (&self.gram, &self.xty);
+        self.pattern.get_or_insert_with(|| solve_spd(gram.clone(), xty))
+    }
+
+    /// The regression with `optimizer` (what [`regress`] returns for the same data).
+    pub fn regress(&mut self, optimizer: &Optimizer) -> Result<Regression, OptimizerError> {
+        optimizer.validate()?;
+        let p = self.x.ncols();
+        let (mut coef, iterations, converged, unbias) = match *optimizer {
+            Optimizer::Stlsq {
+                threshold,
+                alpha,
+                max_iter,
+                unbias,
+            } => {
+                self.init_pattern();
+                let init = self.pattern.as_ref().expect("computed above");
+                let (c, it, conv) = stlsq(&self.gram, &self.xty, init, threshold, alpha, max_iter);
+                (c, it, conv, unbias)
+            }
+            Optimizer::Sr3 {
+                regularizer,
+                reg_weight_lam,
+                relax_coeff_nu,
+                max_iter,
+                tol,
+                unbias,
+            } => {
+                self.init();
+                let init = self.init.as_ref().expect("computed above");
+                let (c, it, conv) = sr3(
+                    &self.gram,
+                    &self.xty,
+                    init,
+                    regularizer,
+                    reg_weight_lam,
+                    relax_coeff_nu,
+                    max_iter,
+                    tol,
+                );
+                (c, it, conv, unbias)
+            }
+        };
+        if unbias {
+            for t in 0..coef.nrows() {
+                let support: Vec<usize> = (0..p).filter(|&j| coef[(t, j)].abs() > 1e-14).collect();
+                let (x, y) = (&self.x, &self.y);
+                let row = self.unbiased.entry((t, support)).or_insert_with_key(|(_, support)| {
+                    let mut row = vec![0.0; p];
+                    if !support.is_empty() {
+                        let xs = x.select_columns(support);
+                        let ys = DMatrix::from_column_slice(y.nrows(), 1, y.column(t).as_slice());
+                        let w = lstsq(&xs, &ys);
+                        for (k, &j) in support.iter().enumerate() {
+                            row[j] = w[(k, 0)];
+                        }
+                    }
+                    row
+                });
+                for j in 0..p {
+                    coef[(t, j)] = row[j];
                 }
             }
+        }
+        if self.normalize_columns {
             for j in 0..p {
-                coef[(t, j)] = row[j];
+                coef.column_mut(j).unscale_mut(self.norms[j]);
             }
         }
+        Ok(Regression {
+            coef,
+            iterations,
+            converged,
+        })
     }
-    if normalize_columns {
-        for j in 0..p {
-            coef.column_mut(j).unscale_mut(norms[j]);
-        }
-    }
-    Ok(Regression {
-        coef,
-        iterations,
-        converged,
-    })
 }
 
 /// Minimum-norm least squares `numpy.linalg.lstsq(a, b, rcond=None)`: features × targets.
@@ -335,19 +422,18 @@ fn solve_spd(a: DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
     }
 }
 
-/// `STLSQ._reduce`. `init`: features × targets. Returns targets × features.
+/// `STLSQ._reduce` on the normal equations (`gram` = XᵀX, `xty` = XᵀY). `init`: features × targets.
+/// Returns targets × features.
 fn stlsq(
-    x: &DMatrix<f64>,
-    y: &DMatrix<f64>,
+    gram: &DMatrix<f64>,
+    xty: &DMatrix<f64>,
     init: &DMatrix<f64>,
     threshold: f64,
     alpha: f64,
     max_iter: usize,
 ) -> (DMatrix<f64>, usize, bool) {
-    let p = x.ncols();
-    let t = y.ncols();
-    let gram = x.transpose() * x;
-    let xty = x.transpose() * y;
+    let p = gram.ncols();
+    let t = xty.ncols();
     let mut ind = vec![vec![true; p]; t];
     let n_selected0 = t * p;
     // Non-zero pattern of the previous history entry (the lstsq guess first).
@@ -410,11 +496,11 @@ fn stlsq(
     (optvar, iterations, converged)
 }
 
-/// `SR3._reduce` (no trimming). `init`: features × targets. Returns targets × features.
+/// `SR3._reduce` (no trimming) on the normal equations (`gram` = XᵀX, `xty` = XᵀY). `init`: features × targets. Returns targets × features.
 #[allow(clippy::too_many_arguments)]
 fn sr3(
-    x: &DMatrix<f64>,
-    y: &DMatrix<f64>,
+    gram: &DMatrix<f64>,
+    xty: &DMatrix<f64>,
     init: &DMatrix<f64>,
     regularizer: Regularizer,
     lam: f64,
@@ -422,12 +508,11 @@ fn sr3(
     max_iter: usize,
     tol: f64,
 ) -> (DMatrix<f64>, usize, bool) {
-    let p = x.ncols();
-    let mut a = x.transpose() * x;
+    let p = gram.ncols();
+    let mut a = gram.clone();
     for j in 0..p {
         a[(j, j)] += 1.0 / nu;
     }
-    let xty = x.transpose() * y;
     let chol = a.clone().cholesky();
     let weight = lam * nu;
     let prox = |v: f64| -> f64 {
@@ -446,7 +531,7 @@ fn sr3(
     let mut iterations = 0;
     let mut converged = false;
     for _ in 0..max_iter {
-        let rhs = &xty + &sparse / nu;
+        let rhs = xty + &sparse / nu;
         let full = match &chol {
             Some(c) => c.solve(&rhs),
             None => solve_spd(a.clone(), &rhs),
@@ -473,6 +558,63 @@ mod tests {
         let b = DMatrix::from_row_slice(4, 1, &[1.0, 3.0, 5.0, 7.0]);
         let w = lstsq(&a, &b);
         assert!((w[(0, 0)] - 1.0).abs() < 1e-12 && (w[(1, 0)] - 2.0).abs() < 1e-12);
+    }
+
+    /// A sweep on one `Prepared` (shared normal equations, cached unbiased refits) gives every
+    /// value the regression a fresh `regress` gives, bit for bit; STLSQ and SR3.
+    #[test]
+    fn a_prepared_sweep_is_fresh_regressions() {
+        let n = 200;
+        let theta = DMatrix::from_fn(n, 6, |k, j| {
+            let t = k as f64 * 0.05;
+            match j {
+                0 => 1.0,
+                1 => t.sin(),
+                2 => (2.0 * t).cos(),
+                3 => t.sin() * t.cos(),
+                4 => (0.3 * t).sin() + 0.01 * (k % 5) as f64,
+                _ => t.sin().powi(3),
+            }
+        });
+        let y = DMatrix::from_fn(n, 2, |k, c| {
+            let noise = 0.01 * (((k * 7919 + c * 31) % 97) as f64 / 97.0 - 0.5);
+            if c == 0 {
+                2.0 * theta[(k, 1)] - 0.5 * theta[(k, 2)] + noise
+            } else {
+                0.3 * theta[(k, 0)] + 1.5 * theta[(k, 3)] + 0.05 * theta[(k, 4)] + noise
+            }
+        });
+        let mut prepared = Prepared::new(&theta, &y, true).unwrap();
+        for opt in [Optimizer::stlsq(0.1), Optimizer::sr3(Regularizer::L0, 0.1)] {
+            for value in [0.0, 0.01, 0.05, 0.1, 0.5, 1.0, 0.05] {
+                let o = opt.with_sparsity(value);
+                let a = prepared.regress(&o).unwrap();
+                let b = regress(&theta, &y, &o, true).unwrap();
+                assert!(a
+                    .coef
+                    .iter()
+                    .zip(b.coef.iter())
+                    .all(|(x, y)| x.to_bits() == y.to_bits()));
+                assert_eq!((a.iterations, a.converged), (b.iterations, b.converged));
+            }
+        }
+        // STLSQ from the QR least-squares guess (PySINDy's) and from the normal equations' pattern
+        // reaches the same coefficients in the same passes.
+        let qr_guess = lstsq(&prepared.x, &prepared.y);
+        let pattern = prepared.init_pattern().clone();
+        for threshold in [0.0, 0.01, 0.05, 0.1, 0.5, 1.0, 5.0] {
+            let a = stlsq(&prepared.gram, &prepared.xty, &qr_guess, threshold, 1e-3, 20);
+            let b = stlsq(&prepared.gram, &prepared.xty, &pattern, threshold, 1e-3, 20);
+            assert!(a.0.iter().zip(b.0.iter()).all(|(x, y)| x.to_bits() == y.to_bits()));
+            assert_eq!((a.1, a.2), (b.1, b.2));
+        }
+        // STLSQ finds the first row's two terms.
+        let r = prepared.regress(&Optimizer::stlsq(0.5)).unwrap();
+        assert!(
+            (r.coef[(0, 1)] - 2.0).abs() < 0.01 && (r.coef[(0, 2)] + 0.5).abs() < 0.01,
+            "{}",
+            r.coef
+        );
     }
 
     #[test]
