@@ -225,21 +225,25 @@ pub(crate) fn cancelling(
 }
 
 /// The command channels whose corrected response is more than [`SLOWDOWN`] × slower than the
-/// base model's: one warning each.
+/// base model's once the time the named delays and lags of the channel add by themselves is taken
+/// off (a measured delay of 0.1 s on a 0.09 s loop doubles its t63 and is what the aircraft does;
+/// a rescaled loop that answers 4× slower is not): one warning each.
 pub fn slowdowns(times: &[ChannelTime]) -> Vec<String> {
     times
         .iter()
         .filter_map(|t| {
             let (b, c) = (t.base.t63?, t.corrected.t63?);
-            (b > 0.0 && c > SLOWDOWN * b).then(|| {
+            let rest = c - t.delays_and_lags.max(0.0);
+            (b > 0.0 && c > SLOWDOWN * b && rest > SLOWDOWN * b).then(|| {
                 format!(
                     "SUSPICIOUS, not recommended: the corrections make {} → {} answer {:.1}× slower than the base model \
-                     (63 % in {c:.3} s against {b:.3} s; more than {SLOWDOWN}× is not what a physical effect of the \
-                     catalogue does to a model of the same aircraft class) — check the named effects before using \
-                     corrected.json",
+                     (63 % in {c:.3} s against {b:.3} s, of which named delays and lags add {:.3} s; more than {SLOWDOWN}× \
+                     is not what a physical effect of the catalogue does to a model of the same aircraft class) — check \
+                     the named effects before using corrected.json",
                     t.input,
                     t.output,
-                    c / b
+                    c / b,
+                    t.delays_and_lags
                 )
             })
         })
@@ -347,7 +351,7 @@ mod tests {
 
     #[test]
     fn a_fourfold_slowdown_is_flagged() {
-        let ch = |base: f64, corrected: f64| ChannelTime {
+        let ch = |base: f64, corrected: f64, delays_and_lags: f64| ChannelTime {
             input: "u_vz".into(),
             output: "vz".into(),
             base: Response {
@@ -358,10 +362,15 @@ mod tests {
                 t63: Some(corrected),
                 gain: 1.0,
             },
+            delays_and_lags,
         };
-        let w = slowdowns(&[ch(0.42, 1.67), ch(0.163, 0.209)]);
+        let w = slowdowns(&[ch(0.42, 1.67, 0.0), ch(0.163, 0.209, 0.04)]);
         assert_eq!(w.len(), 1, "{w:?}");
         assert!(w[0].contains("u_vz → vz answer 4.0× slower"), "{w:?}");
-        assert!(slowdowns(&[ch(0.2, 0.4)]).is_empty());
+        assert!(slowdowns(&[ch(0.2, 0.4, 0.0)]).is_empty());
+        // A 0.1 s delay on a 0.09 s loop: 2.1× slower, all of it the delay.
+        assert!(slowdowns(&[ch(0.09, 0.19, 0.1)]).is_empty());
+        // A 0.05 s delay that comes with a 3× slower loop is flagged.
+        assert_eq!(slowdowns(&[ch(0.1, 0.35, 0.05)]).len(), 1);
     }
 }
