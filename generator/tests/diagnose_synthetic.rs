@@ -530,7 +530,6 @@ fn loop_mismatch() {
     let options = DiagnoseOptions {
         model_text: Some(text),
         where_analysis: false,
-        candidates,
         ..DiagnoseOptions::default()
     };
     let d = diagnose(&m, &[train], &[test], &options).unwrap();
