@@ -49,25 +49,23 @@ pub(crate) fn implausible(kind: EffectKind, values: &[f64], g: f64) -> Vec<Strin
         EffectKind::ForceBias if values.len() == 3 => {
             let lim = MAX_FORCE_BIAS_G * g;
             let h = values[0].hypot(values[1]);
-            if !(h <= lim) {
+            if h.is_nan() || h > lim {
                 out.push(format!(
                     "force_bias horizontal {h:.3} m/s² is above the plausible {lim:.2} m/s² ({MAX_FORCE_BIAS_G} g)"
                 ));
             }
-            if !(values[2].abs() <= lim) {
+            if values[2].is_nan() || values[2].abs() > lim {
                 out.push(format!(
                     "force_bias.z {:.3} m/s² is outside the plausible ±{lim:.2} m/s² (±{MAX_FORCE_BIAS_G} g)",
                     values[2]
                 ));
             }
         }
-        EffectKind::ThrustGain if values.len() == 1 => {
-            if !(THRUST_GAIN_MIN..=THRUST_GAIN_MAX).contains(&values[0]) {
-                out.push(format!(
-                    "thrust_gain {:.3} is outside the plausible [{THRUST_GAIN_MIN}, {THRUST_GAIN_MAX}] (thrust per command × 0.5 … 2)",
-                    values[0]
-                ));
-            }
+        EffectKind::ThrustGain if values.len() == 1 && !(THRUST_GAIN_MIN..=THRUST_GAIN_MAX).contains(&values[0]) => {
+            out.push(format!(
+                "thrust_gain {:.3} is outside the plausible [{THRUST_GAIN_MIN}, {THRUST_GAIN_MAX}] (thrust per command × 0.5 … 2)",
+                values[0]
+            ));
         }
         _ => {}
     }
