@@ -306,6 +306,9 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     })
     .map_err(|e| e.to_string())?;
     bar.finish_and_clear();
+    for w in &d.warnings {
+        eprintln!("warning: {w}");
+    }
     println!("verdict: {}", d.verdict.join(" + "));
     for e in d.effects.iter().take(4) {
         println!(

@@ -79,7 +79,27 @@ fn linear(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &R
                 kind, names[q], values[q], sigma[q], clamped[q]
             )
         })
-        .collect();
+        .collect::<Vec<String>>();
+    // Physical checks (super::physical): every named linear effect within its plausible range with
+    // this one added, and no pair of them cancelling each other on the data.
+    let mut invalid = invalid;
+    invalid.extend(super::physical::implausible_added(
+        (&state.linear, &state.theta[fin]),
+        (&kinds, &per_fit[fin]),
+        p.ctx.gravity,
+    ));
+    invalid.extend(
+        super::physical::cancelling(
+            &cur.designs,
+            &p.fits[fin].train,
+            &p.mask,
+            &kinds,
+            &per_fit[fin],
+            Some(kind),
+        )
+        .iter()
+        .map(|c| c.sentence()),
+    );
     let channels = if kind == EffectKind::GroundEffect || super::design::vertical_only(kind) {
         vec![2]
     } else {

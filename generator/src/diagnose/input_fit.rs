@@ -63,7 +63,7 @@ fn refine_over_the_horizon(p: &Problem, state: &State, scans: &mut [ChannelScan]
         })
         .collect();
     let refined = super::horizon_fit::refine_delays(p, state, &channels);
-    let max = p.options.max_delay_samples * p.dt();
+    let max = p.max_delay();
     for (&q, v) in kept.iter().zip(refined) {
         let scan = &mut scans[q];
         let shift = v - scan.param.value;
@@ -124,14 +124,25 @@ fn scan_channel(
     };
     match kind {
         EffectKind::Latency => {
-            for v in delay_grid(o.max_delay_samples, 1.0, dt) {
+            // Whole samples (every `step` samples up to `max`, then every sample around the
+            // best), then quarter samples around the best.
+            let (max, step) = (p.max_delay(), p.delay_step_samples());
+            let inside = |v: f64| v >= 0.0 && v <= max + 1e-12;
+            for v in delay_grid(max / dt, step, dt).into_iter().filter(|v| inside(*v)) {
                 add(&mut points, v);
             }
-            let best = argmin(&points, fin, &aff);
-            let centre = points[best].value;
+            let centre = points[argmin(&points, fin, &aff)].value;
+            let reach = step as i64 - 1;
+            for q in -reach..=reach {
+                let v = centre + q as f64 * dt;
+                if inside(v) {
+                    add(&mut points, v);
+                }
+            }
+            let centre = points[argmin(&points, fin, &aff)].value;
             for q in [-0.75, -0.5, -0.25, 0.25, 0.5, 0.75] {
                 let v = centre + q * dt;
-                if v >= 0.0 && v <= o.max_delay_samples * dt + 1e-12 {
+                if inside(v) {
                     add(&mut points, v);
                 }
             }
@@ -171,6 +182,18 @@ fn scan_channel(
             profile_sigma([a.value, b.value, c.value], [ell(a), ell(b), ell(c)])
         })
         .flatten();
+    // A delay at the end of the scan is not an estimate: the optimum may lie beyond it.
+    let at_edge = kind == EffectKind::Latency && value >= p.max_delay() - 0.5 * dt;
+    let not_kept = if value > 0.0 && z <= rules.min_z {
+        Some(format!("z = {z:.2} is not above {}", rules.min_z))
+    } else if value > 0.0 && at_edge {
+        Some(format!(
+            "{value:.3} s is at the edge of the scan (0 … {:.3} s): no estimate",
+            p.max_delay()
+        ))
+    } else {
+        None
+    };
     ChannelScan {
         param: InputParam {
             input: j,
@@ -179,8 +202,8 @@ fn scan_channel(
             seed: None,
             sigma,
             z,
-            kept: z > rules.min_z && value > 0.0,
-            not_kept: (value > 0.0 && z <= rules.min_z).then(|| format!("z = {z:.2} is not above {}", rules.min_z)),
+            kept: z > rules.min_z && value > 0.0 && !at_edge,
+            not_kept,
         },
         aff,
         chosen,

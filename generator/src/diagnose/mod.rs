@@ -35,6 +35,7 @@ mod horizon_rule;
 mod inherited;
 mod input_fit;
 mod loop_fit;
+pub mod physical;
 mod plots;
 mod problem;
 mod report_json;
@@ -79,7 +80,9 @@ pub struct DiagnoseOptions {
     pub gravity: Option<f64>,
     /// Rotor radius R of the ground effect, m (0.1651, the Matrice 100's).
     pub rotor_radius: f64,
-    /// Largest delay scanned, in samples (10).
+    /// Largest delay scanned, in samples (10); `latency`'s scan reaches at least 1/3 s whatever the
+    /// rate (coarser whole-sample steps on fast logs, then every sample and quarter samples around
+    /// the best; docs/diagnose.md#fitting).
     pub max_delay_samples: f64,
     /// Time constants scanned for the actuator lag, s (24 values from 0.01 to 1 s, logarithmic).
     pub lag_grid: Vec<f64>,
@@ -215,6 +218,11 @@ pub struct Diagnosis {
     #[serde(skip)]
     pub corrected: serde_json::Value,
     pub notes: Vec<String>,
+    /// What keeps the diagnosis physical ([`physical`]; docs/diagnose.md#physical-checks): effects
+    /// not named because they were implausible or cancelled a named one, named effects that
+    /// cancel or left their range after backfitting, and command channels the corrections slow
+    /// down more than 2× ("SUSPICIOUS, not recommended"). Printed on stderr by the CLI.
+    pub warnings: Vec<String>,
     /// How each command channel answers, base model against corrected model (step responses,
     /// [`response_time`]).
     pub response_times: Vec<response_time::ChannelTime>,
@@ -492,6 +500,7 @@ fn run(
     );
 
     let response_times = response_time::compare(&problem, &state);
+    let warnings = physical_warnings(&problem, &state, &rounds, &response_times);
     // Parameters of the named effects: the final fit; per fold for the cross-validated shrink.
     let fin = problem.final_fit();
     let (linear, mut notes) = catalogue::linear::linear_parameters(&state.linear, &state.theta[fin]);
@@ -542,10 +551,57 @@ fn run(
         corrections,
         corrected,
         notes,
+        warnings,
         response_times,
         options: options.clone(),
         where_input,
     })
+}
+
+/// The physical checks' findings ([`physical`]): candidates left out for them, the final state's
+/// linear effects (after backfitting), and the command channels' slow-down.
+fn physical_warnings(
+    problem: &problem::Problem,
+    state: &problem::State,
+    rounds: &[select::Round],
+    times: &[response_time::ChannelTime],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    for (r, round) in rounds.iter().enumerate() {
+        for c in &round.candidates {
+            let physical: Vec<&String> = c
+                .reasons
+                .iter()
+                .filter(|m| m.starts_with("implausible: ") || m.starts_with("not identifiable: "))
+                .collect();
+            // Only where the physical check decided: the candidate passed every other rule.
+            if !physical.is_empty() && physical.len() == c.reasons.len() {
+                for m in physical {
+                    out.push(format!("round {}: {} not named — {m}", r + 1, c.kind));
+                }
+            }
+        }
+    }
+    let fin = problem.final_fit();
+    if !state.linear.is_empty() {
+        let g = problem.ctx.gravity;
+        for (_, m) in physical::implausible_all(&state.linear, &state.theta[fin], g) {
+            out.push(format!("the named effects after backfitting: {m}"));
+        }
+        let cur = problem::current(problem, state);
+        for c in physical::cancelling(
+            &cur.designs,
+            &problem.fits[fin].train,
+            &problem.mask,
+            &state.linear,
+            &state.theta[fin],
+            None,
+        ) {
+            out.push(format!("the named effects after backfitting: {}", c.sentence()));
+        }
+    }
+    out.extend(physical::slowdowns(times));
+    out
 }
 
 /// The prepared training (and held-out) data; an error when either has no usable segment.

@@ -15,6 +15,10 @@ use super::score::{sums_masked, Sums};
 use super::DiagnoseOptions;
 use std::ops::Range;
 
+/// The shortest span of `latency`'s delay scan, s (10 samples at 30 Hz; twice the longest
+/// command delay of the aircraft classes the project has data of, m100_like's 0.176 s).
+pub const MIN_LATENCY_SCAN: f64 = 1.0 / 3.0;
+
 /// Training and test segments of one fit.
 #[derive(Clone, Debug)]
 pub(crate) struct Fold {
@@ -52,6 +56,25 @@ impl Problem<'_> {
         let mut dts: Vec<f64> = self.data.raw.iter().map(|s| s.dt).collect();
         dts.sort_by(f64::total_cmp);
         dts.get(dts.len() / 2).copied().unwrap_or(0.0)
+    }
+
+    /// The longest delay `latency` scans, s: `max_delay_samples` samples, but at least
+    /// [`MIN_LATENCY_SCAN`] (so that a fast log is scanned as far in time as a 30 Hz one).
+    pub fn max_delay(&self) -> f64 {
+        let dt = self.dt();
+        (self.options.max_delay_samples * dt).max(MIN_LATENCY_SCAN)
+    }
+
+    /// The whole-sample step of the coarse delay scan: the scan spans [`Problem::max_delay`] in
+    /// at most `max_delay_samples` steps (1 sample when that reaches it, e.g. at 30 Hz).
+    pub fn delay_step_samples(&self) -> f64 {
+        let dt = self.dt();
+        if dt <= 0.0 {
+            return 1.0;
+        }
+        (self.max_delay() / dt / self.options.max_delay_samples.max(1.0) - 1e-9)
+            .ceil()
+            .max(1.0)
     }
 
     /// The fits whose test segments are scored.

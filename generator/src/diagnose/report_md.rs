@@ -94,6 +94,16 @@ fn header(s: &mut String, d: &Diagnosis) {
             .join(" + ")
     };
     let _ = writeln!(s, "Verdict: {verdict}.\n");
+    if !d.warnings.is_empty() {
+        let _ = writeln!(
+            s,
+            "**Physical checks** ([docs/diagnose.md](docs/diagnose.md#physical-checks)):\n"
+        );
+        for w in &d.warnings {
+            let _ = writeln!(s, "- {w}");
+        }
+        let _ = writeln!(s);
+    }
     if d.shrink.closed_loop.verdict.as_deref() == Some("worse") {
         let _ = writeln!(
             s,

@@ -13,9 +13,9 @@
 //! threshold, it moved (d > 0 or τ > 0), and the held-out free runs are not worse with it (on top of
 //! the channels kept before it, strongest first).
 //!
-//! `channel_response` is named over `latency` or `actuator_lag` only by its score: a pure delay
-//! costs it two parameters more per channel (ΔBIC), so the simpler effect wins where it explains
-//! as much.
+//! `channel_response` is named over `latency` or `actuator_lag` only when its score beats theirs by
+//! [`super::select::RESPONSE_MARGIN`] (significant or not): a pure delay costs it two parameters
+//! more per channel (ΔBIC), and its gain and lag absorb part of the base model's own errors.
 
 use super::catalogue::inputs::InputTransform;
 use super::catalogue::EffectKind;

@@ -20,6 +20,8 @@ use serde::Serialize;
 
 /// Driven state per input (u_vz → vz, u_roll → roll, u_pitch → pitch, u_yaw_rate → yaw_rate).
 pub const OUTPUT: [usize; 4] = [8, 3, 4, 11];
+/// The acceleration row each input drives (vz, roll_rate, pitch_rate, yaw_rate; 0 = vx).
+pub const DRIVEN_ROW: [usize; 4] = [2, 3, 4, 5];
 /// Step size per input (in the input's unit: m/s, rad, rad, rad/s).
 pub const STEP: [f64; 4] = [0.5, 0.05, 0.05, 0.3];
 /// Length of the simulated response, s.
@@ -41,6 +43,10 @@ pub struct ChannelTime {
     pub output: String,
     pub base: Response,
     pub corrected: Response,
+    /// The response time the named delays and lags of this channel add by themselves, s: the
+    /// fitted delay, the change of the input's lag and the lag of the driven acceleration row.
+    /// A slow-down beyond it is what [`super::physical::slowdowns`] judges.
+    pub delays_and_lags: f64,
 }
 
 impl ChannelTime {
@@ -125,12 +131,16 @@ pub(crate) fn compare(p: &Problem, state: &State) -> Vec<ChannelTime> {
     let plain = Augmented::plain(p.base, p.ctx);
     let corrected = p.augmented(state, p.final_fit());
     let names = crate::logs::STATE_COLUMNS;
+    let (tp, tc) = (&plain.transform, &corrected.transform);
     (0..4)
         .map(|j| ChannelTime {
             input: crate::logs::INPUT_COLUMNS[j].to_string(),
             output: names[OUTPUT[j]].to_string(),
             base: respond(&plain, j, dt, base_substeps),
             corrected: respond(&corrected, j, dt, corrected.substeps(dt, base_substeps)),
+            delays_and_lags: (tc.total_delay(j) - tp.total_delay(j))
+                + (tc.lag[j].unwrap_or(0.0) - tp.lag[j].unwrap_or(0.0))
+                + (tc.accel_lag[DRIVEN_ROW[j]].unwrap_or(0.0) - tp.accel_lag[DRIVEN_ROW[j]].unwrap_or(0.0)),
         })
         .collect()
 }
