@@ -10,7 +10,7 @@ seconds=${1:-60}
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(model log plant mpc_options pysindy)
+    targets=(model log plant mpc_options pysindy import_ulog import_bag import_mcap import_dataflash import_csv)
 fi
 # libFuzzer writes new inputs into the first corpus directory: a scratch copy keeps the committed
 # seeds small.

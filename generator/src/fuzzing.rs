@@ -72,3 +72,48 @@ pub fn pysindy(data: &[u8]) {
     // The CLI validates the import exactly so; an error here is reported, not a panic.
     let _ = crate::model::parse(&json, "imported.json");
 }
+
+/// A recording of `format` imported with the preset `preset`, strictly and with `--partial`: an
+/// error value is a clear rejection; what imports is converted to the CSV of the contract and read
+/// back.
+fn import_recording(data: &[u8], format: crate::import::Format, preset: &str) {
+    use crate::import::{import_bytes, ImportOptions, Profile};
+    if data.len() > MAX_INPUT {
+        return;
+    }
+    let profile = Profile::resolve(preset).expect("the presets parse");
+    for partial in [false, true] {
+        let options = ImportOptions {
+            partial,
+            ..ImportOptions::default()
+        };
+        if let Ok(imported) = import_bytes("fuzz", Some(format), data, &profile, &options) {
+            let _ = crate::logs::parse_log(&imported.to_csv(), "imported.csv");
+        }
+    }
+}
+
+/// A PX4 ULog with the `px4` preset.
+pub fn import_ulog(data: &[u8]) {
+    import_recording(data, crate::import::Format::Ulog, "px4");
+}
+
+/// A ROS 1 bag with the `dji-osdk-ros` preset.
+pub fn import_bag(data: &[u8]) {
+    import_recording(data, crate::import::Format::Bag, "dji-osdk-ros");
+}
+
+/// An MCAP file with the `mavros` preset.
+pub fn import_mcap(data: &[u8]) {
+    import_recording(data, crate::import::Format::Mcap, "mavros");
+}
+
+/// An ArduPilot DataFlash log with the `ardupilot` preset.
+pub fn import_dataflash(data: &[u8]) {
+    import_recording(data, crate::import::Format::DataFlash, "ardupilot");
+}
+
+/// A CSV of another schema with the `csv` template profile.
+pub fn import_csv(data: &[u8]) {
+    import_recording(data, crate::import::Format::Csv, "csv");
+}

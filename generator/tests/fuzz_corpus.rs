@@ -50,3 +50,28 @@ fn mpc_options_corpus() {
 fn pysindy_corpus() {
     replay("pysindy", uavgen::fuzzing::pysindy);
 }
+
+#[test]
+fn import_ulog_corpus() {
+    replay("import_ulog", uavgen::fuzzing::import_ulog);
+}
+
+#[test]
+fn import_bag_corpus() {
+    replay("import_bag", uavgen::fuzzing::import_bag);
+}
+
+#[test]
+fn import_mcap_corpus() {
+    replay("import_mcap", uavgen::fuzzing::import_mcap);
+}
+
+#[test]
+fn import_dataflash_corpus() {
+    replay("import_dataflash", uavgen::fuzzing::import_dataflash);
+}
+
+#[test]
+fn import_csv_corpus() {
+    replay("import_csv", uavgen::fuzzing::import_csv);
+}

@@ -998,3 +998,29 @@ fn identify_on_the_imported_ulog_and_mcap_gives_the_csv_model() {
     assert!(!r.status.success());
     assert!(stderr(&r).contains("a PX4 ULog file needs --profile"), "{}", stderr(&r));
 }
+
+/// Writes the importers' fuzz seeds (fuzz/corpus/import_*/flight.*) from a 1.5 s simulated flight,
+/// small enough for the fuzz targets' 64 KiB input limit: `cargo test --release -p uavgen --test
+/// import write_fuzz_seeds -- --ignored` (docs/testing.md, "Fuzzing").
+#[test]
+#[ignore = "writes the fuzz seeds into fuzz/corpus; run by hand"]
+fn write_fuzz_seeds() {
+    let plant = uavgen::sim::PlantFile::load(&repo().join("plants/nominal.json")).unwrap();
+    let opts = uavgen::sim::SimulateOptions::parse("excite", "1.5", 3).unwrap();
+    let sim = parse_log(&uavgen::sim::simulate(&plant, &opts).unwrap().to_csv(), "sim.csv").unwrap();
+    let corpus = repo().join("fuzz/corpus");
+    let seeds: [(&str, Vec<u8>); 4] = [
+        ("import_ulog/flight.ulg", px4_ulog(&sim, &Px4Fixture::default()).bytes),
+        ("import_mcap/flight.mcap", mavros_mcap(&sim, false, None)),
+        ("import_bag/flight.bag", dji_bag(&sim, 20).finish()),
+        ("import_dataflash/flight.bin", ardupilot_bin(&sim).bytes),
+    ];
+    for (name, bytes) in seeds {
+        assert!(
+            bytes.len() <= uavgen::fuzzing::MAX_INPUT,
+            "{name}: {} bytes",
+            bytes.len()
+        );
+        std::fs::write(corpus.join(name), bytes).unwrap();
+    }
+}

@@ -1,0 +1,5 @@
+#![no_main]
+//! `cargo +nightly fuzz run import_bag` (docs/testing.md): the body is `uavgen::fuzzing::import_bag`.
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| uavgen::fuzzing::import_bag(data));
