@@ -48,7 +48,7 @@ for run in "${runs[@]}"; do
     elf=$fw/target/qemu-$cpu/thumbv7em-none-eabihf/release/$bin
     echo "== $bin on mps2-$board ($cpu)" >&2
     set +e
-    out=$(timeout 600 qemu-system-arm -M "mps2-$board" -nographic -monitor none -serial none \
+    out=$(timeout 300 qemu-system-arm -M "mps2-$board" -nographic -monitor none -serial none \
         -icount shift=0 -semihosting-config enable=on,target=native -kernel "$elf" 2>&1)
     rc=$?
     set -e
