@@ -12,6 +12,7 @@ pub mod qemu;
 use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 use cortex_m::peripheral::DWT;
+#[cfg(not(feature = "qemu"))]
 use panic_halt as _;
 use uavgen_runtime::{ControlErrorKind, Controller, CycleCounter, MpcSolver, Real, Trajectory};
 
