@@ -5,6 +5,7 @@
 #  3. regenerates generated/ and fails if the checked-in crates differ;
 #  4. builds the no_std crates, the C ABI staticlib and the firmware example for thumbv7em-none-eabihf
 #     (no panic path, empty .data), and checks the functions' thumbv7em stack bounds against their limits;
+#     runs the firmware example's closed loop on emulated Cortex-M4 and M7 cores (QEMU);
 #  5. runs all unit, property, reference and CLI tests (release build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -16,6 +17,11 @@ rustup component add clippy rustfmt >/dev/null 2>&1 || true
 if ! command -v arm-none-eabi-gcc >/dev/null && command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
     (apt-get update -qq && apt-get install -y -qq gcc-arm-none-eabi) >/dev/null 2>&1 ||
         echo "could not install gcc-arm-none-eabi: the Cortex-M link and stack-bound steps will be skipped" >&2
+fi
+# QEMU's system emulator for the on-target closed loop (Debian's package), likewise.
+if ! command -v qemu-system-arm >/dev/null && command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    (apt-get update -qq && apt-get install -y -qq --no-install-recommends qemu-system-arm) >/dev/null 2>&1 ||
+        echo "could not install qemu-system-arm: the on-target closed loop will be skipped" >&2
 fi
 
 echo "== format and lints"
@@ -100,6 +106,16 @@ if command -v arm-none-eabi-gcc >/dev/null && rustup toolchain list | grep -q '^
     scripts/stack_bounds.sh
 else
     echo "arm-none-eabi-gcc or the nightly toolchain missing: skipping the stack bounds" >&2
+fi
+
+echo "== the closed loop on emulated Cortex-M4 and M7 (QEMU; scripts/target_bench.sh --ci)"
+# The firmware example (feature qemu) on mps2-an386 and mps2-an500 under -icount: f32 on both, f64
+# on the M7; fails on any feedback or reference error, a failed instruction-count calibration or a
+# hang. Prints the per-step instruction counts (docs/benchmarks.md, "On the target").
+if command -v qemu-system-arm >/dev/null; then
+    scripts/target_bench.sh --ci
+else
+    echo "qemu-system-arm not found: skipping the on-target closed loop (Debian: qemu-system-arm)" >&2
 fi
 
 echo "== tests"

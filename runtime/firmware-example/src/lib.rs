@@ -4,11 +4,15 @@
 //! The binaries (`src/bin/*.rs`) only pick a generated crate, wrap its `Mpc` with
 //! `uavgen_runtime::mpc_adapter!`, and call [`fly`].
 #![no_std]
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)] // one exception: the painted-stack scan of the `qemu` feature
+
+#[cfg(feature = "qemu")]
+pub mod qemu;
 
 use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 use cortex_m::peripheral::DWT;
+#[cfg(not(feature = "qemu"))]
 use panic_halt as _;
 use uavgen_runtime::{ControlErrorKind, Controller, CycleCounter, MpcSolver, Real, Trajectory};
 
