@@ -277,8 +277,10 @@ fn forward<const NV: usize>(u: &[[Real; NV]; NV], w: &mut [Real; NV], start: usi
         // All eight exactly zero (columns of another component, `with_groups`): nothing to do.
         if x.iter().any(|&xc| xc != 0.0) {
             let lo = (j + 8).min(end);
-            let r = core::array::from_fn(|c| rows.get(c).map_or(&[][..], |row| &row[lo..end]));
-            axpy8(&mut w[lo..end], &x, r);
+            let r = core::array::from_fn(|c| rows.get(c).map_or(&[][..], |row| tail(row, lo, end)));
+            if let Some(w) = w.get_mut(lo..end) {
+                axpy8(w, &x, r);
+            }
         }
         j += 8;
     }
@@ -293,11 +295,10 @@ fn forward<const NV: usize>(u: &[[Real; NV]; NV], w: &mut [Real; NV], start: usi
         let x3 = (((wj[3] - x0 * r0[j + 3]) - x1 * r1[j + 3]) - x2 * r2[j + 3]) / r3[j + 3];
         wj.copy_from_slice(&[x0, x1, x2, x3]);
         let lo = j + 4;
-        axpy4(
-            &mut w[lo..end],
-            [x0, x1, x2, x3],
-            [&r0[lo..end], &r1[lo..end], &r2[lo..end], &r3[lo..end]],
-        );
+        if let Some(w) = w.get_mut(lo..end) {
+            let r = [tail(r0, lo, end), tail(r1, lo, end), tail(r2, lo, end), tail(r3, lo, end)];
+            axpy4(w, [x0, x1, x2, x3], r);
+        }
         j += 4;
     }
     while j < stop {
@@ -305,9 +306,18 @@ fn forward<const NV: usize>(u: &[[Real; NV]; NV], w: &mut [Real; NV], start: usi
         let x = w[j % NV] / r[j % NV];
         w[j % NV] = x;
         let lo = (j + 1).min(end);
-        axpy(&mut w[lo..end], x, &r[lo..end]);
+        if let Some(w) = w.get_mut(lo..end) {
+            axpy(w, x, tail(r, lo, end));
+        }
         j += 1;
     }
+}
+
+/// `r[lo..end]`, or nothing where that range is not in `r` (never, by the callers' loop bounds:
+/// a checked slice keeps a bounds-check panic path out of builds that cannot prove it).
+#[inline(always)]
+fn tail(r: &[Real], lo: usize, end: usize) -> &[Real] {
+    r.get(lo..end).unwrap_or(&[])
 }
 
 /// Σ_{c<8} r_c x_c, in pairs (vectorises on SSE2).

@@ -272,9 +272,11 @@ fn forward<const NV: usize>(
         if x.iter().any(|&xc| xc != 0.0) {
             let lo = (j + 8).min(end);
             let r = core::array::from_fn(|c| {
-                rows.get(c).map_or(&[][..], |row| &row[lo..end])
+                rows.get(c).map_or(&[][..], |row| tail(row, lo, end))
             });
-            axpy8(&mut w[lo..end], &x, r);
+            if let Some(w) = w.get_mut(lo..end) {
+                axpy8(w, &x, r);
+            }
         }
         j += 8;
     }
@@ -290,11 +292,15 @@ fn forward<const NV: usize>(
             / r3[j + 3];
         wj.copy_from_slice(&[x0, x1, x2, x3]);
         let lo = j + 4;
-        axpy4(
-            &mut w[lo..end],
-            [x0, x1, x2, x3],
-            [&r0[lo..end], &r1[lo..end], &r2[lo..end], &r3[lo..end]],
-        );
+        if let Some(w) = w.get_mut(lo..end) {
+            let r = [
+                tail(r0, lo, end),
+                tail(r1, lo, end),
+                tail(r2, lo, end),
+                tail(r3, lo, end),
+            ];
+            axpy4(w, [x0, x1, x2, x3], r);
+        }
         j += 4;
     }
     while j < stop {
@@ -302,9 +308,17 @@ fn forward<const NV: usize>(
         let x = w[j % NV] / r[j % NV];
         w[j % NV] = x;
         let lo = (j + 1).min(end);
-        axpy(&mut w[lo..end], x, &r[lo..end]);
+        if let Some(w) = w.get_mut(lo..end) {
+            axpy(w, x, tail(r, lo, end));
+        }
         j += 1;
     }
+}
+/// `r[lo..end]`, or nothing where that range is not in `r` (never, by the callers' loop bounds:
+/// a checked slice keeps a bounds-check panic path out of builds that cannot prove it).
+#[inline(always)]
+fn tail(r: &[Real], lo: usize, end: usize) -> &[Real] {
+    r.get(lo..end).unwrap_or(&[])
 }
 /// Σ_{c<8} r_c x_c, in pairs (vectorises on SSE2).
 #[inline]
