@@ -296,7 +296,12 @@ fn forward<const NV: usize>(u: &[[Real; NV]; NV], w: &mut [Real; NV], start: usi
         wj.copy_from_slice(&[x0, x1, x2, x3]);
         let lo = j + 4;
         if let Some(w) = w.get_mut(lo..end) {
-            let r = [tail(r0, lo, end), tail(r1, lo, end), tail(r2, lo, end), tail(r3, lo, end)];
+            let r = [
+                tail(r0, lo, end),
+                tail(r1, lo, end),
+                tail(r2, lo, end),
+                tail(r3, lo, end),
+            ];
             axpy4(w, [x0, x1, x2, x3], r);
         }
         j += 4;
