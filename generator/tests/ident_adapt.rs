@@ -115,7 +115,15 @@ fn assert_pd_adapted(v: &serde_json::Value, err: &str) {
         .iter()
         .map(|x| x.as_f64().unwrap())
         .collect();
-    assert!(xi[9] > 0.0 && xi[3] == xi[9], "{xi:?}");
+    assert!(xi[3] == xi[9], "{xi:?}");
+    // Where the yaw damping itself came out 0 (nothing to fit it on), the yaw channel is dead in
+    // the model: said, not hidden.
+    if xi[9] == 0.0 {
+        assert!(
+            err.contains("warning: u_yaw_rate: the model does not act on it"),
+            "{err}"
+        );
+    }
     assert_eq!(
         v["provenance"]["options"]["unit_gain"],
         serde_json::json!([false, false, false, true])
@@ -126,7 +134,7 @@ fn assert_pd_adapted(v: &serde_json::Value, err: &str) {
 #[test]
 fn nano_still_heading_both_methods_write_an_adapted_model() {
     let dir = tempfile::tempdir().unwrap();
-    let log = hold_heading(dir.path(), "nano", "12");
+    let log = hold_heading(dir.path(), "nano", "20");
     let (v, err) = identify_defaults("sindy", &log, dir.path());
     assert_sindy_adapted(&v, &err);
     // The Savitzky-Golay window is 0.3 s at the log's 100 Hz.

@@ -536,17 +536,20 @@ fn same_seed_same_bytes_different_seed_differs() {
 #[test]
 fn simulated_logs_read_back() {
     let f = plant_file("m100_like.json");
-    let opts = SimulateOptions::new(Profile::ALL.to_vec(), vec![30.0, 10.0, 10.0, 10.0, 10.0], 3);
+    let opts = SimulateOptions::new(Profile::ALL.to_vec(), vec![30.0, 10.0, 10.0, 10.0, 10.0, 10.0], 3);
     let log = simulate(&f, &opts).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("all.csv");
     log.write(&path).unwrap();
     let read = uavgen::logs::read_log(&path).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(read.segments.len(), 5);
+    assert_eq!(read.segments.len(), 6);
     assert_eq!(read.rows(), log.rows.len());
     assert_eq!(read.meta("format"), Some("uavgen flight log v1"));
     assert_eq!(read.meta("rate_hz"), Some("30"));
-    assert_eq!(read.meta("profile"), Some("excite,hover,circle,sinusoid,spiral"));
+    assert_eq!(
+        read.meta("profile"),
+        Some("excite,excite-hold-heading,hover,circle,sinusoid,spiral")
+    );
     assert_eq!(read.meta("seed"), Some("3"));
     assert!(read.meta("plant").unwrap().ends_with("m100_like.json"));
     assert!(read.segments.iter().all(|s| s.battery_voltage.is_some()));

@@ -36,22 +36,10 @@ use std::f64::consts::PI;
 pub const INPUTS: [&str; 4] = ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"];
 /// The state each channel commands (vz, roll, pitch, yaw_rate).
 pub const COMMANDED: [usize; 4] = [8, 3, 4, 11];
-/// The row each channel drives (vz, roll_rate, pitch_rate, yaw_rate).
-pub const DRIVEN_ROW: [usize; 4] = [8, 9, 10, 11];
-const STATE_NAMES: [&str; 12] = [
-    "x",
-    "y",
-    "z",
-    "roll",
-    "pitch",
-    "yaw",
-    "vx",
-    "vy",
-    "vz",
-    "roll_rate",
-    "pitch_rate",
-    "yaw_rate",
-];
+/// The row each channel drives (vz, roll_rate, pitch_rate, yaw_rate): the delay scan's.
+pub use super::response::DRIVEN_ROW;
+/// State names (log order).
+const STATE_NAMES: [&str; 12] = crate::model::DEFAULT_STATES;
 /// |static gain| below which a commanded channel is said to have no effect.
 pub const ZERO_GAIN: f64 = 0.05;
 /// The margin added on each side of the logged heading arc for the horizon check's start yaw.

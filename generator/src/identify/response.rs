@@ -46,20 +46,8 @@ use nalgebra::{DMatrix, DVector};
 pub const INPUTS: [&str; 4] = ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"];
 /// The state row each channel drives (vz, roll_rate, pitch_rate, yaw_rate).
 pub const DRIVEN_ROW: [usize; 4] = [8, 9, 10, 11];
-const STATE_NAMES: [&str; 12] = [
-    "x",
-    "y",
-    "z",
-    "roll",
-    "pitch",
-    "yaw",
-    "vx",
-    "vy",
-    "vz",
-    "roll_rate",
-    "pitch_rate",
-    "yaw_rate",
-];
+/// State names (log order).
+const STATE_NAMES: [&str; 12] = DEFAULT_STATES;
 /// The angle integrated from the driven row in the loop free runs (roll, pitch), if any.
 const LOOP_ANGLE: [Option<usize>; 4] = [None, Some(3), Some(4), None];
 /// States in the loop regressors: vx vy vz roll pitch roll_rate pitch_rate yaw_rate.
