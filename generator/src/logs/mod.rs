@@ -132,11 +132,20 @@ pub fn parse_log(text: &str, label: &str) -> Result<FlightLog, LogError> {
     let table = parse::parse(text, label)?;
     let measured = segments::measured_period(&table.rows);
     // The nominal period: the metadata rate if given (a contradicting time column shows in the
-    // report's warnings), else the median step. A metadata rate that would make most steps of a
-    // log of more than [`quality::RATE_TRUSTED_ROWS`] rows gaps (the median step a gap) is not used
-    // to find them: a wrong `# rate_hz` would split the log into single rows.
+    // report's warnings), else the median step. A metadata rate under which more than 90 % of the
+    // steps of a log of more than [`quality::RATE_TRUSTED_ROWS`] rows would be gaps is not used to
+    // find them: a wrong `# rate_hz` would split the log into single rows.
+    let gap_share = |hz: f64| {
+        let steps: Vec<bool> = table
+            .rows
+            .windows(2)
+            .filter(|w| w[0].segment == w[1].segment)
+            .map(|w| w[1].t - w[0].t > GAP_PERIODS / hz)
+            .collect();
+        steps.iter().filter(|g| **g).count() as f64 / steps.len().max(1) as f64
+    };
     let nominal = match (table.rate_hz, measured) {
-        (Some((hz, _)), Some(p)) if table.rows.len() > quality::RATE_TRUSTED_ROWS && p > GAP_PERIODS / hz => Some(p),
+        (Some((hz, _)), Some(p)) if table.rows.len() > quality::RATE_TRUSTED_ROWS && gap_share(hz) > 0.9 => Some(p),
         (Some((hz, _)), _) => Some(1.0 / hz),
         (None, m) => m,
     };

@@ -7,9 +7,9 @@ use std::fmt;
 /// A time step that differs from the segment's median period by more than this fraction is irregular.
 pub const IRREGULAR_FRACTION: f64 = 0.10;
 
-/// In a log of more rows than this, a metadata rate under which the median step is a gap is not
-/// used to find gaps (the time column's median step is): a wrong `# rate_hz` would otherwise split
-/// the log into single rows. (Shorter logs keep the metadata: their median says little.)
+/// In a log of more rows than this, a metadata rate under which more than 90 % of the steps are
+/// gaps is not used to find gaps (the time column's median step is): a wrong `# rate_hz` would
+/// otherwise split the log into single rows. (Shorter logs keep the metadata.)
 pub const RATE_TRUSTED_ROWS: usize = 20;
 
 /// A measured rate that differs from the metadata `rate_hz` by more than this fraction is reported.
