@@ -478,3 +478,88 @@ pub fn identify(logs: &[FlightLog], options: &IdentifyOptions, report: &dyn Repo
     }
     Ok(Identified { json, model, warnings })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_savgol_window_is_about_0_3_s_at_any_rate() {
+        assert_eq!(savgol_window(1.0 / 30.0), 9);
+        assert_eq!(savgol_window(1.0 / 50.0), 15);
+        assert_eq!(savgol_window(1.0 / 100.0), 31);
+        // Never below the smallest window of order 3.
+        assert_eq!(savgol_window(0.5), 5);
+    }
+
+    #[test]
+    fn input_delay_specs() {
+        assert!(matches!(parse_delay_spec(" auto "), Ok(DelaySpec::Auto)));
+        assert!(matches!(parse_delay_spec("none"), Ok(DelaySpec::None)));
+        assert!(matches!(parse_delay_spec("0.1"), Ok(DelaySpec::List(d)) if d == [0.1; 4]));
+        assert!(
+            matches!(parse_delay_spec("u_roll=0.08, u_vz=0.13"), Ok(DelaySpec::List(d)) if d == [0.13, 0.08, 0.0, 0.0])
+        );
+        let e = parse_input_delay("u_thrust=0.1").unwrap_err();
+        assert!(e.contains("unknown input 'u_thrust'"), "{e}");
+        let e = parse_input_delay("-0.1").unwrap_err();
+        assert!(e.contains("within [0,"), "{e}");
+    }
+
+    #[test]
+    fn options_are_checked_before_any_work() {
+        let ok = IdentifyOptions::new(Method::Sindy, "m");
+        assert!(ok.validate().is_ok());
+        let e = IdentifyOptions {
+            alpha: Some(0.1),
+            ..IdentifyOptions::new(Method::Pd, "m")
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.starts_with("--alpha"), "{e}");
+        let e = IdentifyOptions {
+            mass: -1.0,
+            ..IdentifyOptions::new(Method::Pd, "m")
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.starts_with("--mass"), "{e}");
+        let e = IdentifyOptions {
+            savgol_window: Some(4),
+            ..ok.clone()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.starts_with("--savgol-window"), "{e}");
+    }
+
+    #[test]
+    fn a_constant_log_is_refused_naming_it() {
+        let n = 50;
+        let log = FlightLog {
+            source: "still.csv".into(),
+            metadata: Vec::new(),
+            segments: vec![crate::logs::Segment {
+                index: 0,
+                t: (0..n).map(|k| k as f64 / 30.0).collect(),
+                x: vec![[0.0; 12]; n],
+                u: vec![[0.0; 4]; n],
+                battery_voltage: None,
+                first_line: 2,
+            }],
+            report: crate::logs::QualityReport {
+                source: "still.csv".into(),
+                rows: n,
+                metadata_rate_hz: None,
+                measured_period: None,
+                nominal_period: None,
+                segments: Vec::new(),
+            },
+        };
+        let e = identify(&[log], &IdentifyOptions::new(Method::Pd, "m"), &Quiet).unwrap_err();
+        assert!(
+            e.starts_with("still.csv: every state and input column is constant"),
+            "{e}"
+        );
+    }
+}
