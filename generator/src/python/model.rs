@@ -22,7 +22,11 @@ pub struct PyModel {
 impl PyModel {
     /// Validate `text` as `uavgen::model::parse` does (the CLI's messages, naming `label`).
     pub fn parse(text: String, label: &str) -> PyResult<Self> {
-        let model = crate::model::parse(&text, label).map_err(err)?;
+        let mut model = crate::model::parse(&text, label).map_err(err)?;
+        // As `uavgen::load`: the generated crates' provenance names the file, not its directory.
+        if let Some(name) = std::path::Path::new(label).file_name() {
+            model.source.file = name.to_string_lossy().into_owned();
+        }
         Ok(Self::new(text, label.to_owned(), model))
     }
 
