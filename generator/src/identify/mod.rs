@@ -5,6 +5,7 @@ pub mod horizon_check;
 pub mod horizon_delay;
 pub mod loop_refine;
 pub mod pd;
+pub mod pipeline;
 pub mod preprocess;
 pub mod response;
 pub mod sindy;
