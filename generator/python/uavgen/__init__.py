@@ -534,13 +534,46 @@ def generate(model: Union[Model, PathLike], horizon: int = 30, out: Optional[Pat
     return {"crate_name": name, "out": directory, "substeps": substeps_used, "summary": summary}
 
 
-def identify(*args: Any, **kwargs: Any) -> Model:  # replaced below when the bindings have it
-    """``uavgen identify``: not available in this build of the extension module."""
-    raise UavgenError("uavgen.identify: this build of uavgen._uavgen has no identify binding")
+def identify(logs: Any, method: str = "sindy", out: Optional[PathLike] = None, name: Optional[str] = None,
+             force: bool = False, profile: Optional[str] = None, savgol_window: Optional[int] = None,
+             savgol_order: int = 3, library: str = "physics", all_rows: bool = False, optimizer: str = "stlsq",
+             threshold: Optional[float] = None, sweep: bool = False, sweep_values: Optional[Sequence[float]] = None,
+             alpha: Optional[float] = None, horizon_check: bool = True, criterion: str = "bic",
+             input_delay: Any = "auto", stale: str = "interpolate", targets: Optional[str] = None,
+             refine_loops: Union[bool, str] = True, mass: float = 2.4, lowpass: Optional[float] = None,
+             progress: bool = False) -> Model:
+    """``uavgen identify``: a SINDy (``method="sindy"``) or PD (``"pd"``) model from flight logs
+    (Logs or paths, read with ``profile``), with the CLI's defaults. The keyword arguments are the
+    CLI's flags (``--savgol-window`` is ``savgol_window``, ``--no-horizon-check`` is
+    ``horizon_check=False``, ``--refine-loops none`` is ``refine_loops=False``; ``input_delay`` is
+    ``"auto"``, ``"none"``, seconds, or ``"u_vz=0.13,…"``). The model is named ``name``, else
+    ``out``'s stem, else ``identified``; ``out`` also writes the file (byte for byte what
+    ``uavgen identify --out`` writes). Warnings are issued as UavgenWarning; with
+    ``progress=True`` the CLI's messages are printed on stderr as they come."""
+    if out is not None and os.path.exists(_path(out)) and not force:
+        raise UavgenError(f"{_path(out)}: exists; pass force=True to overwrite it")
+    if name is None:
+        name = os.path.splitext(os.path.basename(_path(out)))[0] if out is not None else "identified"
+    if isinstance(refine_loops, str):
+        if refine_loops not in ("auto", "none"):
+            raise UavgenError(f"refine_loops: `{refine_loops}` is not one of auto, none")
+        refine_loops = refine_loops == "auto"
+    if not isinstance(input_delay, str):
+        input_delay = repr(float(input_delay))
+    text, warns, _lines = _uavgen.identify(
+        _logs(logs, profile), method, name, None if out is None else _path(out), savgol_window, savgol_order,
+        library, all_rows, optimizer, threshold, sweep, None if sweep_values is None else [float(v) for v in sweep_values],
+        alpha, horizon_check, criterion, input_delay, stale, targets, bool(refine_loops), float(mass), lowpass, progress,
+    )
+    _warn(warns)
+    if out is None:
+        return Model.from_json(text, name)
+    tmp = _path(out) + ".uavgen-tmp"
+    with open(tmp, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    os.replace(tmp, _path(out))
+    return Model.load(out)
 
-
-if hasattr(_uavgen, "identify"):
-    from ._identify import identify  # noqa: E402,F811
 
 # The PySINDy bridge and the compiled solver (generator/python/uavgen/pysindy.py, compile.py).
 try:  # pragma: no cover - present when those modules are

@@ -7,6 +7,7 @@
 mod diagnose;
 mod evaluate;
 mod generate;
+mod identify;
 mod logs;
 mod model;
 mod simulate;
@@ -63,5 +64,6 @@ fn uavgen_module(module: &Bound<'_, PyModule>) -> PyResult<()> {
     generate::register(module)?;
     simulate::register(module)?;
     diagnose::register(module)?;
+    identify::register(module)?;
     Ok(())
 }
