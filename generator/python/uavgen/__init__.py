@@ -509,7 +509,7 @@ def diagnose(model: Union[Model, PathLike], logs: Any, holdout: Any = (), out: O
     diagnosis's warnings are issued as UavgenWarning."""
     m = _model(model)
     report, corrected, warns, _files = _uavgen.diagnose(
-        m._inner, _logs(logs, profile), _logs(list(holdout), profile), None if out is None else _path(out), force,
+        m._inner, _logs(logs, profile), _logs(holdout, profile), None if out is None else _path(out), force,
         horizon, substeps, float(rotor_radius), gravity, None if effects is None else list(effects), max_effects,
         float(max_delta_bic), float(min_reduction), float(min_z), savgol_window, savgol_order,
         None if plant is None else _path(plant), None if mpc is None else _path(mpc), pointwise, where, stale,
