@@ -6,7 +6,8 @@
 #  4. builds the no_std crates, the C ABI staticlib and the firmware example for thumbv7em-none-eabihf
 #     (no panic path, empty .data), and checks the functions' thumbv7em stack bounds against their limits;
 #     runs the firmware example's closed loop on emulated Cortex-M4 and M7 cores (QEMU);
-#  5. runs all unit, property, reference and CLI tests (release build).
+#  5. installs the Python package (pip install ./generator) in a fresh venv and runs its pytest suite;
+#  6. runs all unit, property, reference and CLI tests (release build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -117,6 +118,19 @@ if command -v qemu-system-arm >/dev/null; then
 else
     echo "qemu-system-arm not found: skipping the on-target closed loop (Debian: qemu-system-arm)" >&2
 fi
+
+echo "== Python package: pip install ./generator in a fresh venv, pytest (docs/python.md)"
+# The bindings (feature `python`) lint clean too; the package is built by maturin from PyPI (pip's
+# build isolation) against the workspace's target directory, and its results are compared with the
+# CLI's (the release binary built here).
+cargo clippy -p uavgen --all-targets --release -q --features python -- -D warnings
+cargo build --release -q -p uavgen
+venv=$target_dir/pyvenv
+rm -rf "$venv"
+# venv (Debian: python3-venv), else virtualenv from PyPI.
+python3 -m venv "$venv" 2>/dev/null || { python3 -m pip install -q --user virtualenv && python3 -m virtualenv -q "$venv"; }
+"$venv/bin/pip" install -q --disable-pip-version-check ./generator pytest pandas
+UAVGEN_BIN=$target_dir/release/uavgen CARGO_TARGET_DIR=$target_dir "$venv/bin/python" -m pytest -q generator/python/tests
 
 echo "== tests"
 log=$(mktemp)

@@ -8,6 +8,7 @@
 pub mod analysis;
 pub mod bench;
 pub mod codegen;
+pub mod commands;
 pub mod diagnose;
 pub mod discretize;
 pub mod evaluate;
@@ -32,3 +33,5 @@ pub use ir::ModelIr;
 pub use model::{load, Model};
 pub use mpc_options::MpcOptions;
 pub use sim::{Plant, PlantError, PlantFile, Profile, SimulateOptions};
+#[cfg(feature = "python")]
+mod python;

@@ -5,8 +5,7 @@ mod cli;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use uavgen::codegen::write::write_all_with;
-use uavgen::codegen::{default_crate_name, Float, GenerateOptions, QpChoice};
+use uavgen::codegen::{Float, GenerateOptions, QpChoice};
 use uavgen::model::pysindy::{import, ImportOptions, KinematicRows};
 
 #[derive(Parser)]
@@ -291,42 +290,16 @@ fn generate(args: GenerateArgs) -> Result<(), String> {
         },
         ..GenerateOptions::default()
     };
-    options.validate().map_err(|e| e.to_string())?;
-    let name = options
-        .crate_name
-        .clone()
-        .unwrap_or_else(|| default_crate_name(&model.name));
-    let out = args.out.unwrap_or_else(|| PathBuf::from(&name));
-    // Refuse early, before the (possibly slow) substep scan.
-    uavgen::codegen::write::check_target(&out).map_err(|e| e.to_string())?;
-    let generated = cli::progress::with_spinner("generating (substep rule, Jacobians, code)", || {
-        uavgen::generate(&model, &options)
-    })
-    .map_err(|e| format!("{}: {e}", path.display()))?;
-    write_all_with(&out, &generated.files, args.force).map_err(|e| e.to_string())?;
-    let how = match &generated.substep_choice {
-        Some(c) => format!(
-            "auto: stiffest eigenvalue {:.1}{:+.1}i 1/s over {} envelope points",
-            c.stiffest.re, c.stiffest.im, c.points
-        ),
-        None => "given".into(),
-    };
-    println!(
-        "generated crate `{}` in {} ({} states, {} inputs, N = {}, {} RK4 substeps per sample ({how}))",
-        generated.crate_name,
-        out.display(),
-        model.nx(),
-        model.nu(),
-        options.horizon,
-        generated.substeps
-    );
-    if options.c_api {
-        let p = uavgen::codegen::c_api::prefix(&generated.crate_name);
-        println!(
-            "C ABI: {}/include/{p}.h; build lib{p}_capi.a with `cargo build --release --manifest-path {}/capi/Cargo.toml` (docs/c-api.md)",
-            out.display(),
-            out.display()
-        );
+    let written = uavgen::commands::generate::generate_into(
+        &model,
+        &path.display().to_string(),
+        &options,
+        args.out.as_deref(),
+        args.force,
+        |work| cli::progress::with_spinner("generating (substep rule, Jacobians, code)", work),
+    )?;
+    for line in written.summary(&model, &options) {
+        println!("{line}");
     }
     Ok(())
 }

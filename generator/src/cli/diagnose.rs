@@ -3,7 +3,7 @@
 
 use clap::Args;
 use std::path::PathBuf;
-use uavgen::diagnose::{diagnose_with_progress, DiagnoseOptions, EffectKind, ResidualKind, Rules};
+use uavgen::diagnose::{diagnose_with_progress, DiagnoseOptions, ResidualKind, Rules};
 use uavgen::identify::preprocess::SavGol;
 
 #[derive(Args)]
@@ -163,41 +163,10 @@ fn closed_loop(
     plant: &std::path::Path,
     mpc: Option<&std::path::Path>,
 ) -> uavgen::diagnose::ClosedLoop {
-    let run = || -> Result<Vec<uavgen::diagnose::ClosedLoopRun>, String> {
-        let plant_file = uavgen::PlantFile::load(plant).map_err(|e| e.to_string())?;
-        let text = serde_json::to_string(corrected).map_err(|e| e.to_string())?;
-        let corrected = uavgen::model::parse(&text, "corrected.json").map_err(|e| e.to_string())?;
+    uavgen::commands::diagnose::closed_loop(base, corrected, plant, mpc, |work| {
         eprintln!("flying the base and the corrected model on {} ...", plant.display());
-        super::progress::with_spinner("closed loops: base and corrected model", || {
-            uavgen::track::compare::compare(
-                base,
-                &corrected,
-                &plant_file,
-                30.0,
-                mpc,
-                std::path::Path::new("target/uavgen-track/diagnose"),
-            )
-        })
-    };
-    match run() {
-        Ok(runs) => {
-            let (verdict, note) = uavgen::track::compare::judge(&runs, &plant.display().to_string());
-            uavgen::diagnose::ClosedLoop {
-                status: "measured".into(),
-                plant: Some(plant.display().to_string()),
-                note,
-                verdict: Some(verdict),
-                runs,
-            }
-        }
-        Err(e) => uavgen::diagnose::ClosedLoop {
-            status: "failed".into(),
-            plant: Some(plant.display().to_string()),
-            note: e,
-            verdict: None,
-            runs: Vec::new(),
-        },
-    }
+        super::progress::with_spinner("closed loops: base and corrected model", work)
+    })
 }
 
 fn read_logs(paths: &[PathBuf], profile: Option<&str>) -> Result<Vec<uavgen::logs::FlightLog>, String> {
@@ -222,30 +191,9 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
     super::refuse_existing(&args.out, args.force)?;
     let savgol = SavGol::new(args.savgol_window, args.savgol_order)
         .map_err(|e| format!("--savgol-window/--savgol-order: {e}"))?;
-    let candidates = match &args.effects {
-        None => EffectKind::ALL.to_vec(),
-        Some(names) => names
-            .iter()
-            .map(|n| {
-                EffectKind::from_name(n.trim()).ok_or_else(|| {
-                    let all: Vec<&str> = EffectKind::ALL.iter().map(|e| e.name()).collect();
-                    format!("--effects: unknown effect `{n}` (the catalogue: {})", all.join(", "))
-                })
-            })
-            .collect::<Result<_, _>>()?,
-    };
-    if args.max_effects == 0 {
-        return Err("--max-effects: must be at least 1".into());
-    }
-    for (name, v) in [
-        ("max-delta-bic", args.max_delta_bic),
-        ("min-reduction", args.min_reduction),
-        ("min-z", args.min_z),
-    ] {
-        if !v.is_finite() {
-            return Err(format!("--{name}: must be a finite number, got {v}"));
-        }
-    }
+    let candidates = uavgen::commands::diagnose::effects(args.effects.as_deref())?;
+    let rules =
+        uavgen::commands::diagnose::rules(args.max_effects, args.max_delta_bic, args.min_reduction, args.min_z)?;
     let model = uavgen::load(&model_path).map_err(|e| e.to_string())?;
     let text = std::fs::read_to_string(&model_path).map_err(|e| format!("{}: {e}", model_path.display()))?;
     let train = read_logs(&args.logs, args.profile.as_deref())?;
@@ -261,29 +209,15 @@ pub fn run(args: DiagnoseArgs) -> Result<(), String> {
         substeps: args.substeps,
         gravity: args.gravity,
         rotor_radius: args.rotor_radius,
-        rules: Rules {
-            max_effects: args.max_effects,
-            max_delta_bic: args.max_delta_bic,
-            min_reduction: args.min_reduction,
-            min_z: args.min_z,
-        },
+        rules,
         candidates,
         where_analysis: !args.no_where,
         stale: args.stale,
         model_text: Some(text),
-        source: Some(format!(
-            "uavgen {} diagnose --model {} {}{}",
-            env!("CARGO_PKG_VERSION"),
-            model_path.display(),
-            args.logs
-                .iter()
-                .map(|p| format!("--log {}", p.display()))
-                .collect::<Vec<_>>()
-                .join(" "),
-            args.holdout
-                .iter()
-                .map(|p| format!(" --holdout {}", p.display()))
-                .collect::<String>()
+        source: Some(uavgen::commands::diagnose::source(
+            &model_path.display().to_string(),
+            &args.logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            &args.holdout.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         )),
         plant: args.plant.clone(),
         ..DiagnoseOptions::default()

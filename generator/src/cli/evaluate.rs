@@ -47,12 +47,13 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
     if let Some(dir) = args.plots.as_ref().filter(|d| d.exists() && !d.is_dir()) {
         return Err(format!("--plots {}: exists and is not a directory", dir.display()));
     }
-    if args.horizon == 0 {
-        return Err("--horizon: must be at least 1 sample, got 0".into());
-    }
-    if args.substeps == Some(0) {
-        return Err("--substeps: must be at least 1, got 0".into());
-    }
+    let options = EvaluateOptions {
+        horizon: args.horizon,
+        substeps: args.substeps,
+        stale: args.stale,
+        ..EvaluateOptions::default()
+    };
+    uavgen::commands::evaluate::check_options(&options)?;
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
     let mut logs = Vec::new();
     for path in &args.logs {
@@ -62,24 +63,9 @@ pub fn run(args: EvaluateArgs) -> Result<(), String> {
         logs.push(log.map_err(|e| e.to_string())?);
     }
     // Cheap and worth knowing: where a log leaves the envelope the model was identified on.
-    if let Some(e) = &model.envelope {
-        for (path, log) in args.logs.iter().zip(&logs) {
-            let (outside, rows, states) = uavgen::model::envelope::rows_outside(e, log);
-            if outside > 0 {
-                eprintln!(
-                    "note: {}: {outside} of {rows} rows outside the model's envelope ({}): the model extrapolates there",
-                    path.display(),
-                    states.join(", ")
-                );
-            }
-        }
+    for note in uavgen::commands::evaluate::envelope_notes(&model, &logs) {
+        eprintln!("note: {note}");
     }
-    let options = EvaluateOptions {
-        horizon: args.horizon,
-        substeps: args.substeps,
-        stale: args.stale,
-        ..EvaluateOptions::default()
-    };
     let evaluation =
         super::progress::with_spinner("evaluating (one-step, horizon and whole-flight predictions)", || {
             evaluate(&model, &logs, &options)

@@ -8,9 +8,9 @@ use std::process::ExitCode;
 pub const EXIT_DID_NOT_TRACK: u8 = 3;
 /// Exit status when a loop diverged.
 pub const EXIT_DIVERGED: u8 = 4;
-use uavgen::codegen::GenerateOptions;
+use uavgen::commands::track::Session;
 use uavgen::sim::PlantFile;
-use uavgen::track::{self, Backend, GenericBackend, HarnessBackend, TrackOptions, TrackReport, Verdict, VerdictRules};
+use uavgen::track::{self, Backend, TrackReport, Verdict, VerdictRules};
 use uavgen_runtime::Trajectory;
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
@@ -96,67 +96,46 @@ pub struct TrackArgs {
     work_dir: PathBuf,
 }
 
-fn write(path: &Path, text: &str) -> Result<(), String> {
-    super::write_atomically(path, text)
-}
-
 /// Runs `uavgen track`; Ok carries the exit status of the verdicts (0, 3 or 4).
 pub fn run(args: TrackArgs) -> Result<ExitCode, String> {
     super::refuse_existing(&args.out, args.force)?;
-    let max = uavgen::sim::run::MAX_DURATION_S;
-    if !(args.duration.is_finite() && args.duration > 0.0 && args.duration <= max) {
-        return Err(format!(
-            "--duration: must be a positive number of seconds, at most {max}, got {}",
-            uavgen::validate::short(args.duration)
-        ));
-    }
     let rules = VerdictRules {
         max_rmse: args.max_rmse,
         max_distance: args.max_distance,
     };
+    // The duration and the rules are checked before the files are read (as ever).
+    Session::check_duration(args.duration)?;
     rules.validate()?;
     let model = uavgen::load(&args.model).map_err(|e| e.to_string())?;
-    if model.base_nx() != 12 || model.nu() != 4 {
-        return Err(format!(
-            "{}: uavgen track needs a model with the 12 standard states and 4 inputs (this one has {} and {})",
-            args.model.display(),
-            model.base_nx(),
-            model.nu()
-        ));
-    }
+    Session::check_model(&model, &args.model.display().to_string())?;
     let plant = PlantFile::load(&args.plant).map_err(|e| e.to_string())?;
-    let dt = uavgen::Plant::new(&plant, args.seed).sample_period();
     let mpc = match &args.mpc {
         Some(p) => Some(uavgen::MpcOptions::load(&model, p)?),
         None => None,
     };
-    let options = GenerateOptions {
-        horizon: args.horizon,
-        rate_hz: 1.0 / dt,
-        mpc: mpc.clone(),
-        ..GenerateOptions::default()
-    };
-    options.validate().map_err(|e| e.to_string())?;
+    let session = Session::new(
+        model,
+        &args.model.display().to_string(),
+        plant,
+        &args.plant.display().to_string(),
+        args.duration,
+        args.seed,
+        args.horizon,
+        mpc,
+        rules,
+    )?;
 
     let mut backend: Box<dyn Backend> = if args.generic {
-        let ir = uavgen::ModelIr::new(&model);
-        let substeps = uavgen::discretize::auto_substeps(&ir, dt, &options.envelope)
-            .map_err(|e| format!("{}: {e}", args.model.display()))?
-            .substeps;
-        let mpc = mpc.unwrap_or_else(|| uavgen::MpcOptions::defaults(&model));
-        Box::new(GenericBackend::new(&model, mpc, args.horizon, dt, substeps))
+        session.generic_backend()?
     } else {
         eprintln!("building the generated solver and the tracking harness ...");
-        let (name, binary) = super::progress::with_spinner("building", || {
-            track::build::build_harness(&model, &options, &args.work_dir)
-        })?;
-        Box::new(HarnessBackend::spawn(&binary, &name)?)
+        session.harness_backend(&args.work_dir, |work| super::progress::with_spinner("building", work))?
     };
 
     // Everything goes to a scratch directory first, renamed into place at the end.
     let tmp = args.out.with_extension("uavgen-tmp");
     let _ = std::fs::remove_dir_all(&tmp);
-    let reports = match fly_all(&args, &model, &plant, dt, backend.as_mut(), &tmp, &rules) {
+    let reports = match fly_all(&args, &session, backend.as_mut(), &tmp) {
         Ok(r) => r,
         Err(e) => {
             let _ = std::fs::remove_dir_all(&tmp);
@@ -204,12 +183,9 @@ pub fn run(args: TrackArgs) -> Result<ExitCode, String> {
 
 fn fly_all(
     args: &TrackArgs,
-    model: &uavgen::Model,
-    plant: &PlantFile,
-    dt: f64,
+    session: &Session,
     backend: &mut dyn Backend,
     tmp: &Path,
-    rules: &VerdictRules,
 ) -> Result<Vec<TrackReport>, String> {
     let several = args.trajectory.len() > 1;
     let mut summary = Vec::new();
@@ -220,54 +196,13 @@ fn fly_all(
             tmp.to_path_buf()
         };
         std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-        let options = TrackOptions {
-            trajectory: which.trajectory(),
-            duration: args.duration,
-            seed: args.seed,
-            max_distance: rules.max_distance,
-            ..TrackOptions::default()
-        };
-        let bar = super::progress::bar((args.duration / dt).round() as usize, which.name());
-        let mut extender = track::StateExtender::new(model, dt)?;
-        let flight = track::fly(
-            backend,
-            plant,
-            &options,
-            &mut |x, t, u| extender.extend(x, t, u),
-            &mut |done, _| bar.set_position(done as u64),
-        )?;
+        let bar = super::progress::bar(session.planned_samples(), which.name());
+        let (report, flight) = session.fly(backend, which.trajectory(), which.name(), &mut |done| {
+            bar.set_position(done as u64)
+        })?;
         bar.finish_and_clear();
-        let report = TrackReport::new(
-            &args.model.display().to_string(),
-            &args.plant.display().to_string(),
-            which.name(),
-            &backend.describe(),
-            args.seed,
-            dt,
-            &flight,
-            &backend.bounds(),
-            rules,
-        );
-        write(&dir.join("report.md"), &report.markdown())?;
-        let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())? + "\n";
-        write(&dir.join("report.json"), &json)?;
-        write(&dir.join("samples.csv"), &track::report::samples_csv(&flight.samples))?;
-        track::plot::write(&flight.samples, which.name(), &dir)?;
-        println!(
-            "{}: {} ({}); position RMSE {:.4} m (x {:.4}, y {:.4}, z {:.4}), MAE {:.4}, d1 {:.4}; feedback median {:.1} µs, max {:.1} µs; {} inputs out of bounds",
-            which.name(),
-            report.verdict.name().to_uppercase(),
-            report.verdict_reason,
-            report.overall.rmse,
-            report.axes["x"].rmse,
-            report.axes["y"].rmse,
-            report.axes["z"].rmse,
-            report.overall.mae,
-            report.overall.d1,
-            report.feedback.median_us,
-            report.feedback.max_us,
-            report.inputs_out_of_bounds
-        );
+        uavgen::commands::track::write_flight(&dir, which.name(), &report, &flight)?;
+        println!("{}", uavgen::commands::track::summary_line(which.name(), &report));
         if let Some(w) = report.chatter_warning() {
             println!("{}: warning: {w}", which.name());
         }
@@ -275,7 +210,7 @@ fn fly_all(
     }
     if several {
         let json = serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())? + "\n";
-        write(&tmp.join("summary.json"), &json)?;
+        super::write_atomically(&tmp.join("summary.json"), &json)?;
     }
     Ok(summary)
 }
