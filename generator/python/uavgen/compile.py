@@ -634,17 +634,21 @@ def _shared_library_name(package: str) -> str:
     return f"lib{package}.so"
 
 
-def _generate(model_json: str, horizon: int, out: Path, mpc_options_json: Optional[str]) -> None:
+def _generate(model_json: str, horizon: int, out: Path, mpc_options_json: Optional[str], **codegen) -> None:
     from . import _uavgen  # the compiled extension (uavgen/_uavgen)
 
-    _uavgen.generate(model_json, horizon, str(out), True, mpc_options_json, True)
+    # c_api = True, force = True (the cache entry's crate directory is ours to overwrite).
+    _uavgen.generate(model_json, horizon, str(out), True, mpc_options_json, True, **codegen)
 
 
 def compile(model, horizon: int = 30, *, cache_dir: Optional[Union[str, Path]] = None, quiet: bool = True,
+            rate_hz: float = 30.0, substeps: Optional[int] = None, float: str = "f64", qp: str = "auto",
             **mpc_options) -> Mpc:
     """Generate ``model``'s MPC crate with its C ABI, build it with cargo and load it: an :class:`Mpc`.
 
-    ``horizon`` is N (samples); ``mpc_options`` are the MPC options of docs/mpc.md (``q``, ``r``,
+    ``horizon`` is N (samples); ``rate_hz``, ``substeps``, ``float`` (``"f64"``/``"f32"``) and ``qp``
+    (``"auto"``/``"condensed"``/``"riccati"``) are the generator's ``--rate``, ``--substeps``,
+    ``--float`` and ``--qp`` (docs/cli.md); ``mpc_options`` are the MPC options of docs/mpc.md (``q``, ``r``,
     ``r_delta``, ``u_min``, ``u_max``, ``max_qp_iterations``, ``disturbance_gain``, …; what ``--mpc``
     reads). The result is cached in ``cache_dir`` (default :func:`default_cache_dir`) under the
     SHA-256 of the model JSON, the horizon, the options, the uavgen version and the platform: a
@@ -660,10 +664,14 @@ def compile(model, horizon: int = 30, *, cache_dir: Optional[Union[str, Path]] =
     options_json = json.dumps(options, sort_keys=True) if options else None
     if not isinstance(horizon, int) or horizon < 1:
         raise ValueError(f"compile: horizon must be a positive number of samples, got {horizon!r}")
+    # Only what differs from the generator's defaults is passed (and hashed).
+    codegen = {k: v for k, v in (("rate_hz", rate_hz), ("substeps", substeps), ("float", float), ("qp", qp))
+               if v != {"rate_hz": 30.0, "substeps": None, "float": "f64", "qp": "auto"}[k]}
     key = json.dumps(
         {
             "model": model_json,
             "horizon": horizon,
+            "codegen": codegen,
             "mpc_options": options,
             "uavgen": _uavgen_version(),
             "abi": ABI_VERSION,
@@ -689,7 +697,7 @@ def compile(model, horizon: int = 30, *, cache_dir: Optional[Union[str, Path]] =
 
     entry.mkdir(parents=True, exist_ok=True)
     crate = entry / "crate"
-    _generate(model_json, horizon, crate, options_json)
+    _generate(model_json, horizon, crate, options_json, **codegen)
     headers = sorted((crate / "include").glob("*.h"))
     if len(headers) != 1:
         raise CompileError(f"{crate}: expected one header in include/, found {len(headers)}")
