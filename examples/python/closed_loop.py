@@ -4,7 +4,7 @@
 1. **Logs.** A simulated aircraft — the shipped M100 model, models/sindy_m100.json, with its 0.13 s
    u_vz latency, compiled by uavgen and stepped through its C ABI's ``discrete_dynamics`` — flies
    60 s of stepped excitation commands; the samples are written as a uavgen flight log
-   (docs/log-format.md) and read back with numpy.
+   (docs/log-format.md, ``uavgen.Log.from_numpy(...).save``) and read back with ``uavgen.read_log``.
 2. **Model.** PySINDy fits the six dynamic rows (vx … yaw_rate) on the log with uavgen's state names
    (derivatives by finite differences); the kinematic rows x' = vx, … are exact. The fitted
    ``pysindy.SINDy`` becomes a uavgen ``Model`` with ``Model.from_pysindy`` — no export script.
@@ -74,18 +74,14 @@ def fly_excitation(aircraft, seconds, rng):
     return np.arange(n) * dt, X, U
 
 
-def write_log(path, t, X, U):
-    header = ",".join(["t"] + STATES + INPUTS)
-    rows = np.column_stack([t, X, U])
-    np.savetxt(path, rows, delimiter=",", header=header, comments="", fmt="%.17g")
+def write_log(path, t, X, U, rate_hz):
+    """The flight log CSV (docs/log-format.md), written and checked by uavgen's own log reader."""
+    uavgen.Log.from_numpy(t, X, U, rate_hz=rate_hz, name="excitation flight").save(path, force=True)
 
 
 def read_log(path):
-    data = np.genfromtxt(path, delimiter=",", names=True)
-    t = data["t"]
-    X = np.column_stack([data[s] for s in STATES])
-    U = np.column_stack([data[s] for s in INPUTS])
-    return t, X, U
+    d = uavgen.read_log(path).to_numpy()
+    return d["t"], d["x"], d["u"]
 
 
 def fit_pysindy(t, X, U, delays):
@@ -123,7 +119,7 @@ def main():
     sim = uavgen.compile(truth, horizon=30)  # we only use its discrete_dynamics: the simulator
     start = np.array([0.0, 0.0, 5.0] + [0.0] * 9)
     t, X, U = fly_excitation(Aircraft(sim, start), 60.0, np.random.default_rng(7))
-    write_log(out / "flight.csv", t, X, U)
+    write_log(out / "flight.csv", t, X, U, 1.0 / sim.dt)
     t, X, U = read_log(out / "flight.csv")
     print(f"log: {len(t)} samples at {1 / (t[1] - t[0]):.0f} Hz -> {out / 'flight.csv'}")
 
