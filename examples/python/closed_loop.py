@@ -22,7 +22,6 @@ It writes ``flight.csv``, ``model.json``, ``closed_loop.png`` and prints the tra
 """
 
 import argparse
-import math
 import warnings
 from pathlib import Path
 

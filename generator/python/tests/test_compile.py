@@ -47,13 +47,8 @@ class Harness:
     """runtime/track-harness against the crate compile() generated (track/build.rs's manifest)."""
 
     def __init__(self, crate_dir: Path, target: Path, work: Path):
-        name = json_name = None
         manifest = (crate_dir / "Cargo.toml").read_text()
-        for line in manifest.splitlines():
-            if line.startswith("name = "):
-                json_name = line.split('"')[1]
-                break
-        name = json_name
+        name = next(line.split('"')[1] for line in manifest.splitlines() if line.startswith("name = "))
         work.mkdir(parents=True, exist_ok=True)
         (work / "src").mkdir(exist_ok=True)
         (work / "Cargo.toml").write_text(
