@@ -696,6 +696,40 @@ def compile(model, horizon: int = 30, *, cache_dir: Optional[Union[str, Path]] =
         raise CargoNotFoundError(CARGO_HINT.format(where=where))
 
     entry.mkdir(parents=True, exist_ok=True)
+    with _EntryLock(entry / ".lock"):
+        # Another process may have built the entry while this one waited for the lock.
+        if meta_path.is_file():
+            meta = json.loads(meta_path.read_text())
+            lib, header = entry / meta["library"], entry / meta["header"]
+            if lib.is_file() and header.is_file():
+                return Mpc(lib, header, entry / "crate")
+        return _build(entry, meta_path, cache, cargo_path, model_json, horizon, options, options_json, codegen, quiet)
+
+
+class _EntryLock:
+    """An exclusive lock on a cache entry (POSIX flock; no lock where fcntl is missing)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.fh = None
+
+    def __enter__(self):
+        try:
+            import fcntl
+        except ImportError:  # Windows: builds of one entry by two processes at once are not guarded
+            return self
+        self.fh = open(self.path, "w")
+        fcntl.flock(self.fh, fcntl.LOCK_EX)
+        return self
+
+    def __exit__(self, *exc):
+        if self.fh is not None:
+            self.fh.close()  # releases the lock
+        return False
+
+
+def _build(entry: Path, meta_path: Path, cache: Path, cargo_path: str, model_json: str, horizon: int,
+           options: Dict, options_json: Optional[str], codegen: Dict, quiet: bool) -> Mpc:
     crate = entry / "crate"
     _generate(model_json, horizon, crate, options_json, **codegen)
     headers = sorted((crate / "include").glob("*.h"))
