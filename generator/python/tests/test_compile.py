@@ -12,6 +12,7 @@ directory), both cached for the session.
 
 import json
 import os
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -129,6 +130,8 @@ def test_closed_loop_equals_the_rust_harness(mpc, cache, tmp_path):
                 u_py, status = ctl.step(x_py)
                 u_rs, status_rs = harness.step(x_rs)
                 statuses.add(status.name)
+                # The harness prints the Rust Status's Debug name (Solved, IterationCap, …).
+                assert re.sub(r"(?<!^)(?=[A-Z])", "_", status_rs).upper() == status.name, (status_rs, status)
                 assert np.all(u_py >= mpc.u_min) and np.all(u_py <= mpc.u_max)
                 worst_u = max(worst_u, float(np.max(np.abs(u_py - u_rs))))
                 x_py, x_rs = py_plant.step(u_py), rs_plant.step(u_rs)
