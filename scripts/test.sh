@@ -129,7 +129,7 @@ venv=$target_dir/pyvenv
 rm -rf "$venv"
 # venv (Debian: python3-venv), else virtualenv from PyPI.
 python3 -m venv "$venv" 2>/dev/null || { python3 -m pip install -q --user virtualenv && python3 -m virtualenv -q "$venv"; }
-"$venv/bin/pip" install -q --disable-pip-version-check ./generator pytest pandas
+"$venv/bin/pip" install -q --disable-pip-version-check ./generator pandas -r generator/python/requirements-test.txt
 UAVGEN_BIN=$target_dir/release/uavgen CARGO_TARGET_DIR=$target_dir "$venv/bin/python" -m pytest -q generator/python/tests
 
 echo "== tests"

@@ -576,15 +576,16 @@ def identify(logs: Any, method: str = "sindy", out: Optional[PathLike] = None, n
 
 
 # The PySINDy bridge and the compiled solver (generator/python/uavgen/pysindy.py, compile.py).
-try:  # pragma: no cover - present when those modules are
-    from .pysindy import from_pysindy as _from_pysindy
+from .pysindy import from_pysindy as _from_pysindy  # noqa: E402
+from .compile import (  # noqa: E402,F401
+    CargoNotFoundError,
+    CompileError,
+    Controller,
+    Mpc,
+    MpcError,
+    Status,
+    compile,
+)
 
-    Model.from_pysindy = staticmethod(_from_pysindy)  # type: ignore[attr-defined]
-except ImportError:
-    pass
-try:  # pragma: no cover
-    from .compile import Mpc, compile  # noqa: F401
-
-    __all__ += ["compile", "Mpc"]
-except ImportError:
-    pass
+Model.from_pysindy = staticmethod(_from_pysindy)  # type: ignore[attr-defined]
+__all__ += ["compile", "Mpc", "Controller", "Status", "CompileError", "CargoNotFoundError", "MpcError"]
