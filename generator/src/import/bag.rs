@@ -140,7 +140,7 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
 
     // The outer records, and the records inside each chunk, in file order.
     let mut pos = MAGIC.len();
-    'outer: while pos < bytes.len() {
+    while pos < bytes.len() {
         let r = match record(bytes, pos, 0) {
             Ok(r) => r,
             Err((truncated, m)) => {

@@ -135,7 +135,7 @@ impl Damage {
         let unit = format!("{format} record");
         let len = self.to - self.from;
         let kind = if len > 0 && self.zeros * 10 >= len * 9 {
-            " (zero-filled)"
+            ", zero-filled"
         } else {
             ""
         };

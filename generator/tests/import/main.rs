@@ -1075,11 +1075,23 @@ fn write_fuzz_seeds() {
     let opts = uavgen::sim::SimulateOptions::parse("excite", "1.5", 3).unwrap();
     let sim = parse_log(&uavgen::sim::simulate(&plant, &opts).unwrap().to_csv(), "sim.csv").unwrap();
     let corpus = repo().join("fuzz/corpus");
-    let seeds: [(&str, Vec<u8>); 4] = [
-        ("import_ulog/flight.ulg", px4_ulog(&sim, &Px4Fixture::default()).bytes),
+    // Damaged copies (300 zero bytes at 40 %) exercise the resynchronising readers.
+    let zeroed = |mut b: Vec<u8>| {
+        let at = b.len() * 2 / 5;
+        b[at..at + 300].fill(0);
+        b
+    };
+    let ulog = px4_ulog(&sim, &Px4Fixture::default()).bytes;
+    let bag = dji_bag(&sim, 20).finish();
+    let bin = ardupilot_bin(&sim).bytes;
+    let seeds: [(&str, Vec<u8>); 7] = [
+        ("import_ulog/flight.ulg", ulog.clone()),
+        ("import_ulog/zeroed.ulg", zeroed(ulog)),
         ("import_mcap/flight.mcap", mavros_mcap(&sim, false, None)),
-        ("import_bag/flight.bag", dji_bag(&sim, 20).finish()),
-        ("import_dataflash/flight.bin", ardupilot_bin(&sim).bytes),
+        ("import_bag/flight.bag", bag.clone()),
+        ("import_bag/zeroed.bag", zeroed(bag)),
+        ("import_dataflash/flight.bin", bin.clone()),
+        ("import_dataflash/zeroed.bin", zeroed(bin)),
     ];
     for (name, bytes) in seeds {
         assert!(
