@@ -283,3 +283,35 @@ fn nan_in_a_state_field_names_topic_field_and_time() {
     assert!(stderr(&r).contains("field `xyz[2]` is inf at t = "), "{}", stderr(&r));
     assert!(!out.exists());
 }
+
+#[test]
+fn alternatives_are_validated_and_read_back() {
+    // The preset prints and reads back with its `or` lists.
+    let p = px4();
+    assert_eq!(p.rates.alternatives.len(), 2);
+    assert_eq!(Profile::parse(&p.to_json(), "printed").unwrap(), p);
+    // Every (topic, field) of every alternative is read from the file.
+    let needs = p.needs();
+    for want in [
+        ("vehicle_attitude", "rollspeed"),
+        ("sensor_combined", "gyro_rad[2]"),
+        ("vehicle_rates_setpoint", "yaw"),
+    ] {
+        assert!(needs.contains(&(want.0.to_string(), want.1.to_string())), "{want:?}");
+    }
+    // An alternative is checked as the channel itself would be, and named by its place.
+    let mut v: serde_json::Value = serde_json::from_str(&p.to_json()).unwrap();
+    v["rates"]["or"][0]["negate"] = serde_json::json!(["pitch"]);
+    let e = Profile::parse(&v.to_string(), "p.json").unwrap_err();
+    assert!(
+        e.message
+            .starts_with("`rates.or[0]`: `rates.negate` is for Euler-angle rates"),
+        "{e}"
+    );
+    // No `or` inside an `or`.
+    let mut v: serde_json::Value = serde_json::from_str(&p.to_json()).unwrap();
+    let inner = v["rates"]["or"][1].clone();
+    v["rates"]["or"][0]["or"] = serde_json::json!([inner]);
+    let e = Profile::parse(&v.to_string(), "p.json").unwrap_err();
+    assert!(e.message.contains("`rates.or[0]` has an `or` of its own"), "{e}");
+}
