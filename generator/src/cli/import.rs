@@ -25,8 +25,10 @@ pub struct ImportArgs {
     /// (nothing resampled). Every channel is held (zero-order hold) at its latest sample.
     #[arg(long)]
     rate: Option<f64>,
-    /// A truncated or corrupt file: import what was read before the break (with a warning and a
-    /// `# broken:` line in the CSV) instead of failing.
+    /// A truncated or damaged file: import what can be read (the rows before a cut; around a
+    /// damaged stretch, resuming at the next valid records) instead of failing; each damaged
+    /// stretch and the samples and seconds it cost each topic are a warning on stderr and a
+    /// `# damaged:` / `# broken:` line in the CSV.
     #[arg(long)]
     partial: bool,
     /// Overwrite --out if it exists.
@@ -71,6 +73,9 @@ pub fn run(args: ImportArgs) -> Result<(), String> {
             import_file(file, &profile, &options)
         })
         .map_err(|e| e.to_string())?;
+        for c in &next.choices {
+            eprintln!("{}: {c}", file.display());
+        }
         match &mut imported {
             Some(log) => log.append(next),
             None => imported = Some(next),
@@ -84,6 +89,9 @@ pub fn run(args: ImportArgs) -> Result<(), String> {
     uavgen::logs::parse_log(&csv, &out.display().to_string())
         .map_err(|e| format!("the imported log is invalid (a bug, please report it): {e}"))?;
     super::write_atomically(out, &csv)?;
+    for w in imported.warnings() {
+        eprintln!("warning: {w}");
+    }
     println!("wrote {}: {}", out.display(), imported.report());
     Ok(())
 }

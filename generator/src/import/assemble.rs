@@ -125,6 +125,11 @@ fn vector(
     let (t, cols) = rec.series(topic, &names)?;
     let mut v = Vec::with_capacity(t.len());
     for i in 0..t.len() {
+        for (j, c) in cols.iter().enumerate() {
+            if !c[i].is_finite() {
+                return Err(not_finite(rec, topic, &fields[j], c[i], t[i], i, what));
+            }
+        }
         v.push([scale * cols[0][i], scale * cols[1][i], scale * cols[2][i]]);
     }
     Ok(Channel {
@@ -132,6 +137,17 @@ fn vector(
         t: t.to_vec(),
         v,
     })
+}
+
+/// A state field that is NaN or infinite: the topic, field, time and sample.
+fn not_finite(rec: &Recording, topic: &str, field: &str, v: f64, t: f64, i: usize, what: &str) -> ImportError {
+    err(
+        &rec.file,
+        ImportErrorKind::BadValue,
+        format!(
+            "topic `{topic}`, field `{field}` is {v} at t = {t} s (sample {i} of the topic): the {what} must be a finite number (a state is never skipped or invented)"
+        ),
+    )
 }
 
 /// Where an attitude (or attitude setpoint) is and how it is logged.
@@ -148,7 +164,8 @@ struct AttitudeSpec<'a> {
 }
 
 /// Attitude samples as ENU/FLU Euler angles with the yaw unwrapped.
-fn attitude_channel(rec: &Recording, spec: &AttitudeSpec, what: &str) -> Result<Channel<3>, ImportError> {
+/// `state`: the attitude itself, where a NaN is an error (a setpoint's NaN samples are skipped).
+fn attitude_channel(rec: &Recording, spec: &AttitudeSpec, what: &str, state: bool) -> Result<Channel<3>, ImportError> {
     let AttitudeSpec {
         topic,
         quaternion,
@@ -167,6 +184,11 @@ fn attitude_channel(rec: &Recording, spec: &AttitudeSpec, what: &str) -> Result<
     let mut v = Vec::with_capacity(t.len());
     let mut keep_t = Vec::with_capacity(t.len());
     for i in 0..t.len() {
+        if state {
+            if let Some(j) = (0..names.len()).find(|&j| !cols[j][i].is_finite()) {
+                return Err(not_finite(rec, topic, names[j], cols[j][i], t[i], i, what));
+            }
+        }
         let e = if quaternion.is_some() {
             let q = [cols[0][i], cols[1][i], cols[2][i], cols[3][i]];
             if q.iter().any(|x| x.is_nan()) {
@@ -223,7 +245,7 @@ pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result
         scale: a.scale,
         negate: &a.negate,
     };
-    let attitude = attitude_channel(rec, &spec, "attitude")?;
+    let attitude = attitude_channel(rec, &spec, "attitude", true)?;
     let r = &profile.rates;
     let mut rates = vector(rec, &r.topic, &r.fields, r.scale, "rates")?;
     for v in rates.v.iter_mut() {
@@ -263,7 +285,7 @@ pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result
                 scale: input.scale,
                 negate: &input.negate,
             };
-            let e = attitude_channel(rec, &spec, name)?;
+            let e = attitude_channel(rec, &spec, name, false)?;
             let mut v: Vec<[f64; 1]> = e.v.iter().map(|x| [x[angle.index()]]).collect();
             if angle.index() != 2 {
                 // Roll and pitch are not unwrapped; wrap them back into (−π, π].
@@ -305,11 +327,29 @@ pub fn assemble(rec: &Recording, profile: &Profile, grid: GridOptions) -> Result
     // file does not have is noted, not an error.
     let battery = match &profile.battery_voltage {
         Some(b) => match rec.series(&b.topic, &[b.field.as_str()]) {
-            Ok((t, cols)) => Some(Channel {
-                what: format!("battery_voltage (`{}` `{}`)", b.topic, b.field),
-                t: t.to_vec(),
-                v: cols[0].iter().map(|x| [b.scale * x + b.offset]).collect(),
-            }),
+            Ok((t, cols)) => {
+                // A voltage not measured (NaN) is held as a setpoint is, and counted.
+                let keep: Vec<usize> = (0..t.len()).filter(|&i| cols[0][i].is_finite()).collect();
+                if keep.len() < t.len() {
+                    summary.notes.push(format!(
+                        "battery_voltage: {} of {} samples of `{}` `{}` are not finite: skipped (the previous value held)",
+                        t.len() - keep.len(),
+                        t.len(),
+                        b.topic,
+                        b.field
+                    ));
+                }
+                if keep.is_empty() {
+                    summary.notes.push("no battery_voltage column: no finite sample".into());
+                    None
+                } else {
+                    Some(Channel {
+                        what: format!("battery_voltage (`{}` `{}`)", b.topic, b.field),
+                        t: keep.iter().map(|&i| t[i]).collect(),
+                        v: keep.iter().map(|&i| [b.scale * cols[0][i] + b.offset]).collect(),
+                    })
+                }
+            }
             Err(e) => {
                 summary.notes.push(format!("no battery_voltage column: {}", e.message));
                 None

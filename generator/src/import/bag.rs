@@ -14,7 +14,7 @@
 
 use super::error::{ImportError, ImportErrorKind};
 use super::profile::Clock;
-use super::recording::{Recording, SeriesBuilder};
+use super::recording::{Damage, Recording, SeriesBuilder};
 use super::rosmsg::{header_stamp, Definition, Wire};
 use std::collections::{BTreeMap, HashMap};
 
@@ -24,6 +24,9 @@ pub const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 const OP_MESSAGE: u8 = 0x02;
 const OP_CHUNK: u8 = 0x05;
 const OP_CONNECTION: u8 = 0x07;
+const OP_BAG_HEADER: u8 = 0x03;
+const OP_INDEX_DATA: u8 = 0x04;
+const OP_CHUNK_INFO: u8 = 0x06;
 
 /// One record: its header fields and data, at byte `at`.
 struct RawRecord<'a> {
@@ -137,7 +140,7 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
 
     // The outer records, and the records inside each chunk, in file order.
     let mut pos = MAGIC.len();
-    'outer: while pos < bytes.len() {
+    while pos < bytes.len() {
         let r = match record(bytes, pos, 0) {
             Ok(r) => r,
             Err((truncated, m)) => {
@@ -177,21 +180,38 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
                 add_connection(&r, &mut connections, &mut rec);
                 continue;
             }
-            _ => continue,
+            Some(OP_BAG_HEADER | OP_INDEX_DATA | OP_CHUNK_INFO) => continue,
+            op => {
+                // Not a record of the format: nothing says where the next one starts.
+                let mut d = Damage::new(
+                    r.at,
+                    format!(
+                        "the record at byte {} is not a ROS 1 bag record (op {})",
+                        r.at,
+                        op.map_or("missing".to_owned(), |o| format!("{o:#04x}"))
+                    ),
+                    &builders,
+                );
+                d.close(bytes, bytes.len(), false);
+                rec.damage.push(d);
+                break;
+            }
         };
+        // A damaged record inside a chunk: (its byte, why). The chunk's length (in its outer
+        // record) says where the next record starts: the reader resumes there.
+        let mut damage: Option<(usize, String)> = None;
         for (chunk, base) in inner {
             let mut p = 0;
             while p < chunk.len() {
                 let m = match record(chunk, p, base) {
                     Ok(m) if m.cut.is_none() => m,
                     Ok(m) => {
-                        let inner = m.cut.unwrap_or_default();
-                        rec.broken = Some(cut.unwrap_or_else(|| format!("inside the chunk at byte {}: {inner}", r.at)));
-                        break 'outer;
+                        damage = Some((base + p, m.cut.unwrap_or_default()));
+                        break;
                     }
                     Err((_, m)) => {
-                        rec.broken = Some(cut.unwrap_or_else(|| format!("inside the chunk at byte {}: {m}", r.at)));
-                        break 'outer;
+                        damage = Some((base + p, m));
+                        break;
                     }
                 };
                 p = m.next;
@@ -199,8 +219,11 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
                     Some(OP_CONNECTION) => add_connection(&m, &mut connections, &mut rec),
                     Some(OP_MESSAGE) => {
                         let (Some(conn), Some(time)) = (m.u32("conn"), m.fields.get("time")) else {
-                            rec.broken = Some(format!("the message record at byte {} has no `conn` or `time`", m.at));
-                            break 'outer;
+                            damage = Some((
+                                m.at,
+                                format!("the message record at byte {} has no `conn` or `time`", m.at),
+                            ));
+                            break;
                         };
                         let receive = match time.get(..8) {
                             Some(t) => {
@@ -209,16 +232,20 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
                                 s + ns / 1e9
                             }
                             None => {
-                                rec.broken = Some(format!("the message record at byte {} has a short `time`", m.at));
-                                break 'outer;
+                                damage =
+                                    Some((m.at, format!("the message record at byte {} has a short `time`", m.at)));
+                                break;
                             }
                         };
                         let Some(c) = connections.get(&conn) else {
-                            rec.broken = Some(format!(
-                                "the message record at byte {} names connection {conn}, which no record defined before it",
-                                m.at
+                            damage = Some((
+                                m.at,
+                                format!(
+                                    "the message record at byte {} names connection {conn}, which no record defined before it",
+                                    m.at
+                                ),
                             ));
-                            break 'outer;
+                            break;
                         };
                         let Some(builder) = builders.get_mut(&c.topic) else {
                             continue;
@@ -234,11 +261,14 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
                         if let Err(e) = def.decode(Wire::Ros1, m.data, &mut |n, v| {
                             values.insert(n.to_owned(), v);
                         }) {
-                            rec.broken = Some(format!(
-                                "the message at byte {} (topic `{}`, a `{}`) cannot be decoded: {e}",
-                                m.at, c.topic, def.root
+                            damage = Some((
+                                m.at,
+                                format!(
+                                    "the message at byte {} (topic `{}`, a `{}`) cannot be decoded: {e}",
+                                    m.at, c.topic, def.root
+                                ),
                             ));
-                            break 'outer;
+                            break;
                         }
                         let t = match clock {
                             Clock::Header => header_stamp(&values).unwrap_or(receive),
@@ -253,9 +283,31 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
                             |f| values.get(f).copied(),
                         )?;
                     }
-                    _ => {}
+                    op => {
+                        // Inside a chunk only messages and connections are written; anything
+                        // else (a zeroed stretch reads as records without an `op`) is damage.
+                        damage = Some((
+                            m.at,
+                            format!(
+                                "the record at byte {} is not a message or connection record (op {})",
+                                m.at,
+                                op.map_or("missing".to_owned(), |o| format!("{o:#04x}"))
+                            ),
+                        ));
+                        break;
+                    }
                 }
             }
+        }
+        if let Some((at, why)) = damage {
+            if let Some(c) = cut {
+                rec.broken = Some(c);
+                break;
+            }
+            let mut d = Damage::new(at, format!("inside the chunk at byte {}: {why}", r.at), &builders);
+            d.close(bytes, pos, pos < bytes.len());
+            rec.damage.push(d);
+            continue;
         }
         if let Some(c) = cut {
             rec.broken = Some(c);

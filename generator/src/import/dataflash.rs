@@ -11,12 +11,46 @@
 //! of `XKF*`) are read for instance 0 only (a note says so).
 
 use super::error::{ImportError, ImportErrorKind};
-use super::recording::{Recording, SeriesBuilder};
+use super::recording::{Damage, Recording, SeriesBuilder};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 /// The first two bytes of every record.
 pub const HEAD: [u8; 2] = [0xA3, 0x95];
 const FMT: u8 = 0x80;
+
+/// Records in a row (each head `A3 95` and a defined type, each ending where the next begins)
+/// where the reader resumes after a damaged stretch.
+const RESYNC_CHAIN: usize = 3;
+
+/// The first byte at or after `from` where [`RESYNC_CHAIN`] whole records of defined types follow
+/// one another (or fewer that end exactly at the file's end).
+fn resync(bytes: &[u8], from: usize, formats: &HashMap<u8, MsgFormat>) -> Option<usize> {
+    let len = |p: usize| -> Option<usize> {
+        let h = bytes.get(p..p + 3)?;
+        if h[..2] != HEAD {
+            return None;
+        }
+        if h[2] == FMT {
+            Some(89)
+        } else {
+            formats.get(&h[2]).map(|f| f.len)
+        }
+    };
+    let chain = |q: usize| {
+        let mut p = q;
+        for i in 0..RESYNC_CHAIN {
+            if p == bytes.len() {
+                return i > 0;
+            }
+            match len(p) {
+                Some(l) if p + l <= bytes.len() => p += l,
+                _ => return false,
+            }
+        }
+        true
+    };
+    (from..bytes.len()).find(|&q| chain(q))
+}
 
 /// One message type.
 #[derive(Clone, Debug)]
@@ -133,27 +167,49 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)]) -> Result<Reco
             rec.broken = Some(format!("the file is truncated: a record head at byte {at} is cut off"));
             break;
         };
-        if head[..2] != HEAD {
-            rec.broken = Some(format!(
-                "the file is corrupt at byte {at}: {:02x} {:02x} where a record head A3 95 should be",
-                head[0], head[1]
-            ));
-            break;
-        }
         let ty = head[2];
         let len = if ty == FMT {
-            89
+            Some(89)
         } else {
-            match formats.get(&ty) {
-                Some(f) => f.len,
-                None => {
-                    rec.broken = Some(format!(
-                        "the record at byte {at} has type {ty}, which no FMT record defined before it"
-                    ));
-                    break;
-                }
-            }
+            formats.get(&ty).map(|f| f.len)
         };
+        // A record is read only when the record after it starts with a head too: a damaged
+        // stretch (zeros, garbage) may begin inside the record before the first bad head.
+        let next = at + len.unwrap_or(0);
+        let problem = if head[..2] != HEAD {
+            Some(format!(
+                "{:02x} {:02x} where a record head A3 95 should be",
+                head[0], head[1]
+            ))
+        } else if len.is_none() {
+            Some(format!(
+                "the record has type {ty}, which no FMT record defined before it"
+            ))
+        } else if next + 2 <= bytes.len() && bytes[next..next + 2] != HEAD {
+            Some(format!(
+                "{:02x} {:02x} at byte {next}, after the record at byte {at}, where a record head A3 95 should be",
+                bytes[next],
+                bytes[next + 1]
+            ))
+        } else {
+            None
+        };
+        if let Some(problem) = problem {
+            // Skip the damaged stretch: resume at the next run of whole records (never silent:
+            // the stretch and what each mapped message lost are reported).
+            let mut damage = Damage::new(at, problem, &builders);
+            let resume = resync(bytes, at + 1, &formats);
+            damage.close(bytes, resume.unwrap_or(bytes.len()), resume.is_some());
+            rec.damage.push(damage);
+            match resume {
+                Some(q) => {
+                    pos = q;
+                    continue;
+                }
+                None => break,
+            }
+        }
+        let len = len.unwrap_or(0);
         let Some(record) = bytes.get(pos..pos + len) else {
             rec.broken = Some(format!(
                 "the file is truncated: the record at byte {at} needs {len} bytes, {} are left",

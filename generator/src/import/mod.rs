@@ -102,8 +102,17 @@ pub struct Imported {
     pub options: ImportOptions,
     /// Where the file broke (truncated or corrupt), if it did; the rows are from before the break.
     pub broken: Option<String>,
+    /// The damaged stretches skipped inside the file (with `--partial`): where, and the samples
+    /// and seconds each mapped topic lost there, one line each.
+    pub damaged: Vec<String>,
+    /// Which source feeds each contract field, one line per channel, when the profile offers
+    /// alternatives (`rates` from `vehicle_attitude` in an older PX4 log, …); empty otherwise.
+    pub choices: Vec<String>,
     pub notes: Vec<String>,
 }
+
+/// Damaged stretches named in an error (the rest are counted).
+const MAX_SHOWN: usize = 5;
 
 /// Read `path` (format from its first bytes, checked against its extension), map it with
 /// `profile`.
@@ -173,21 +182,37 @@ pub fn import_bytes(
         }
         Format::Csv => table::read(label, bytes, profile)?,
     };
-    let assembled = assemble::assemble(&rec, profile, options.grid);
-    if let Some(b) = rec.broken.as_ref().filter(|_| !options.partial) {
+    // A profile with alternatives (older versions of a flight stack): one source per channel.
+    let (chosen, choices) = profile.choose(label, &rec)?;
+    let assembled = assemble::assemble(&rec, &chosen, options.grid);
+    let damaged = rec.damage_report();
+    if (rec.broken.is_some() || !damaged.is_empty()) && !options.partial {
+        let mut problems = damaged.clone();
+        problems.extend(rec.broken.clone());
         let read = match &assembled {
-            Ok((rows, _)) => format!(
+            Ok((rows, _)) if damaged.is_empty() => format!(
                 "{} rows (t = {} … {} s) can be imported from before the break: pass --partial to keep them",
                 rows.len(),
                 rows.first().map_or(0.0, |r| r.t),
                 rows.last().map_or(0.0, |r| r.t)
             ),
-            Err(e) => format!("nothing usable before the break ({})", e.message),
+            Ok((rows, _)) => format!(
+                "pass --partial to import the {} rows that can be read (t = {} … {} s; a channel that lost samples is held or the rows cut out as a gap)",
+                rows.len(),
+                rows.first().map_or(0.0, |r| r.t),
+                rows.last().map_or(0.0, |r| r.t)
+            ),
+            Err(e) => format!("nothing usable around the damage ({})", e.message),
+        };
+        let shown = problems.len().min(MAX_SHOWN);
+        let more = match problems.len() - shown {
+            0 => String::new(),
+            k => format!("; and {k} more damaged stretch(es)"),
         };
         return Err(ImportError::new(
             label,
             ImportErrorKind::Corrupt,
-            format!("{b}; {read}"),
+            format!("{}{more}; {read}", problems[..shown].join("; ")),
         ));
     }
     let (rows, summary) = assembled?;
@@ -199,6 +224,8 @@ pub fn import_bytes(
         summary,
         options: options.clone(),
         broken: rec.broken,
+        damaged,
+        choices,
         notes: rec.notes,
     })
 }
@@ -272,6 +299,8 @@ impl Imported {
         if self.broken.is_none() {
             self.broken = next.broken.map(|b| format!("{}: {b}", next.source));
         }
+        self.damaged
+            .extend(next.damaged.iter().map(|d| format!("{}: {d}", next.source)));
         self.source = format!("{}, {}", self.source, next.source);
         self.rows.extend(next.rows);
     }
@@ -291,6 +320,9 @@ impl Imported {
         if let Some(b) = &self.broken {
             let _ = writeln!(out, "# broken: {b}");
         }
+        for d in &self.damaged {
+            let _ = writeln!(out, "# damaged: {d}");
+        }
         let _ = writeln!(
             out,
             "# stale: bit 0 position, 1 velocity, 2 attitude, 3 rates held (no new sample since the previous row)"
@@ -306,6 +338,16 @@ impl Imported {
                 let _ = write!(out, ",{b}");
             }
             let _ = writeln!(out, ",{},{}", r.segment, r.stale);
+        }
+        out
+    }
+
+    /// What the import lost or chose, for stderr: the damaged stretches (with `--partial`), where
+    /// the file broke, each contract field's source when a profile offers alternatives.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut out: Vec<String> = self.damaged.iter().map(|d| format!("{}: {d}", self.source)).collect();
+        if let Some(b) = &self.broken {
+            out.push(format!("{}: {b}; the rows before it are kept", self.source));
         }
         out
     }
@@ -366,8 +408,13 @@ impl Imported {
                 s.dropped_segments
             );
         }
-        if let Some(b) = &self.broken {
-            let _ = write!(out, "\n  warning: {b}; the rows before it are kept");
+        if self.broken.is_some() || !self.damaged.is_empty() {
+            let _ = write!(
+                out,
+                "\n  the file is damaged in {} place(s){}: what was lost is on stderr and in the CSV's `# damaged:` / `# broken:` lines",
+                self.damaged.len() + usize::from(self.broken.is_some()),
+                if self.broken.is_some() { " (and cut off)" } else { "" }
+            );
         }
         for n in self.summary.notes.iter().chain(&self.notes) {
             let _ = write!(out, "\n  note: {n}");

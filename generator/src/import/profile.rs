@@ -118,6 +118,14 @@ pub struct Vector {
     /// Multiply by this first (1 for m and m/s; 0.001 for mm and mm/s).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub scale: f64,
+    /// Other sources of the same channel, tried in order when the file lacks this one's topic
+    /// or fields (older versions of a flight stack): the first present with a finite sample is
+    /// used ([`Profile::choose`]).
+    #[serde(default, rename = "or", skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<Vector>,
+    /// Free text shown when this source is chosen (e.g. `PX4 v1.5–1.9`).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub note: String,
 }
 
 /// The attitude: a quaternion `[w, x, y, z]` (body → inertial) or ZYX Euler angles
@@ -140,6 +148,14 @@ pub struct Attitude {
     /// `["pitch"]` for a nose-up pitch in ENU/FLU, where pitch is positive nose down): negated first.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub negate: Vec<Angle>,
+    /// Other sources of the same channel, tried in order when the file lacks this one's topic
+    /// or fields (older versions of a flight stack): the first present with a finite sample is
+    /// used ([`Profile::choose`]).
+    #[serde(default, rename = "or", skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<Attitude>,
+    /// Free text shown when this source is chosen (e.g. `PX4 v1.5–1.9`).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub note: String,
 }
 
 /// How the rates are logged.
@@ -167,6 +183,14 @@ pub struct Rates {
     /// Euler-angle rates logged with the opposite sign (with a nose-up pitch: `["pitch"]`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub negate: Vec<Angle>,
+    /// Other sources of the same channel, tried in order when the file lacks this one's topic
+    /// or fields (older versions of a flight stack): the first present with a finite sample is
+    /// used ([`Profile::choose`]).
+    #[serde(default, rename = "or", skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<Rates>,
+    /// Free text shown when this source is chosen (e.g. `PX4 v1.5–1.9`).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub note: String,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -199,6 +223,14 @@ pub struct Scalar {
     pub scale: f64,
     #[serde(default, skip_serializing_if = "is_zero")]
     pub offset: f64,
+    /// Other sources of the same channel, tried in order when the file lacks this one's topic
+    /// or fields (older versions of a flight stack): the first present with a finite sample is
+    /// used ([`Profile::choose`]).
+    #[serde(default, rename = "or", skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<Scalar>,
+    /// Free text shown when this source is chosen (e.g. `PX4 v1.5–1.9`).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub note: String,
 }
 
 /// Which ZYX Euler angle of an attitude setpoint.
@@ -252,6 +284,14 @@ pub struct Input {
     /// For an Euler setpoint: angles logged with the opposite sign (as `attitude.negate`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub negate: Vec<Angle>,
+    /// Other sources of the same channel, tried in order when the file lacks this one's topic
+    /// or fields (older versions of a flight stack): the first present with a finite sample is
+    /// used ([`Profile::choose`]).
+    #[serde(default, rename = "or", skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<Input>,
+    /// Free text shown when this source is chosen (e.g. `PX4 v1.5–1.9`).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub note: String,
 }
 
 /// One term of an input's sum.
@@ -307,6 +347,43 @@ impl Profile {
     }
 
     fn validate(&self, label: &str) -> Result<(), ImportError> {
+        self.validate_one(label)?;
+        for (ch, (name, _)) in CHANNELS.iter().enumerate() {
+            let mut k = 1;
+            while self.candidate_of(ch, k).is_some() {
+                let p = self.with_candidate(ch, k);
+                let nested = match ch {
+                    0 => self.position.nested(),
+                    1 => self.velocity.nested(),
+                    2 => self.attitude.nested(),
+                    3 => self.rates.nested(),
+                    4 => self.inputs.u_vz.nested(),
+                    5 => self.inputs.u_roll.nested(),
+                    6 => self.inputs.u_pitch.nested(),
+                    7 => self.inputs.u_yaw_rate.nested(),
+                    _ => self.battery_voltage.as_ref().is_some_and(|b| b.nested()),
+                };
+                if nested {
+                    return Err(ImportError::new(
+                        label,
+                        ImportErrorKind::Profile,
+                        format!(
+                            "`{name}.or[{}]` has an `or` of its own: list every alternative in `{name}.or`",
+                            k - 1
+                        ),
+                    ));
+                }
+                p.validate_one(label).map_err(|e| ImportError {
+                    message: format!("`{name}.or[{}]`: {}", k - 1, e.message),
+                    ..e
+                })?;
+                k += 1;
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_one(&self, label: &str) -> Result<(), ImportError> {
         let fail = |m: String| Err(ImportError::new(label, ImportErrorKind::Profile, m));
         if self.format != PROFILE_FORMAT {
             return fail(format!("`format` is `{}`, expected `{PROFILE_FORMAT}`", self.format));
@@ -371,43 +448,20 @@ impl Profile {
         Ok(())
     }
 
-    /// Every (topic, field) the profile reads, in profile order.
+    /// Every (topic, field) the profile reads, in profile order (every alternative's too).
     pub fn needs(&self) -> Vec<(String, String)> {
         let mut out = Vec::new();
-        let mut add = |topic: &str, fields: &[String]| {
-            for f in fields {
-                let item = (topic.to_owned(), f.clone());
-                if !out.contains(&item) {
-                    out.push(item);
+        for ch in 0..CHANNELS.len() {
+            let mut k = 0;
+            while let Some((topic, fields, _)) = self.candidate_of(ch, k) {
+                for f in fields {
+                    let item = (topic.clone(), f);
+                    if !out.contains(&item) {
+                        out.push(item);
+                    }
                 }
+                k += 1;
             }
-        };
-        add(&self.position.topic, &self.position.fields);
-        add(&self.velocity.topic, &self.velocity.fields);
-        if let Some(q) = &self.attitude.quaternion {
-            add(&self.attitude.topic, q);
-        }
-        if let Some(e) = &self.attitude.euler {
-            add(&self.attitude.topic, e);
-        }
-        add(&self.rates.topic, &self.rates.fields);
-        for (_, input) in self.inputs.all() {
-            if let Some(f) = &input.field {
-                add(&input.topic, std::slice::from_ref(f));
-            }
-            if let Some(terms) = &input.terms {
-                let fields: Vec<String> = terms.iter().map(|t| t.field.clone()).collect();
-                add(&input.topic, &fields);
-            }
-            if let Some(q) = &input.quaternion {
-                add(&input.topic, q);
-            }
-            if let Some(e) = &input.euler {
-                add(&input.topic, e);
-            }
-        }
-        if let Some(b) = &self.battery_voltage {
-            add(&b.topic, std::slice::from_ref(&b.field));
         }
         out
     }
@@ -415,6 +469,222 @@ impl Profile {
     /// The profile as pretty JSON (as `--print-profile` shows it).
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).unwrap_or_default() + "\n"
+    }
+}
+
+/// A channel source with alternatives (every mapping struct of a profile).
+trait Source: Clone {
+    fn alternatives(&self) -> &[Self];
+    fn alternatives_mut(&mut self) -> &mut Vec<Self>;
+    fn note(&self) -> &str;
+    fn topic(&self) -> &str;
+    /// Every field it reads.
+    fn fields(&self) -> Vec<String>;
+    /// Candidate `k` (0: itself), without alternatives.
+    fn candidate(&self, k: usize) -> Self {
+        let mut c = if k == 0 {
+            self.clone()
+        } else {
+            self.alternatives()[k - 1].clone()
+        };
+        c.alternatives_mut().clear();
+        c
+    }
+    fn candidates(&self) -> usize {
+        1 + self.alternatives().len()
+    }
+    /// Whether an alternative has alternatives of its own.
+    fn nested(&self) -> bool {
+        self.alternatives().iter().any(|a| !a.alternatives().is_empty())
+    }
+}
+
+macro_rules! source {
+    ($t:ty, |$s:ident| $fields:expr) => {
+        impl Source for $t {
+            fn alternatives(&self) -> &[Self] {
+                &self.alternatives
+            }
+            fn alternatives_mut(&mut self) -> &mut Vec<Self> {
+                &mut self.alternatives
+            }
+            fn note(&self) -> &str {
+                &self.note
+            }
+            fn topic(&self) -> &str {
+                &self.topic
+            }
+            fn fields(&$s) -> Vec<String> {
+                $fields
+            }
+        }
+    };
+}
+
+source!(Vector, |self| self.fields.to_vec());
+source!(Rates, |self| self.fields.to_vec());
+source!(Scalar, |self| vec![self.field.clone()]);
+source!(Attitude, |self| {
+    let mut f: Vec<String> = self.quaternion.iter().flatten().cloned().collect();
+    f.extend(self.euler.iter().flatten().cloned());
+    f
+});
+source!(Input, |self| {
+    let mut f: Vec<String> = self.field.iter().cloned().collect();
+    f.extend(self.terms.iter().flatten().map(|t| t.field.clone()));
+    f.extend(self.quaternion.iter().flatten().cloned());
+    f.extend(self.euler.iter().flatten().cloned());
+    f
+});
+
+/// The channels of a profile, as named in messages (JSON paths) with the contract columns they
+/// feed.
+pub const CHANNELS: [(&str, &str); 9] = [
+    ("position", "x, y, z"),
+    ("velocity", "vx, vy, vz"),
+    ("attitude", "roll, pitch, yaw"),
+    ("rates", "roll_rate, pitch_rate, yaw_rate"),
+    ("inputs.u_vz", "u_vz"),
+    ("inputs.u_roll", "u_roll"),
+    ("inputs.u_pitch", "u_pitch"),
+    ("inputs.u_yaw_rate", "u_yaw_rate"),
+    ("battery_voltage", "battery_voltage"),
+];
+
+/// What [`Profile::choose`] needs to know of a recording.
+pub trait Available {
+    /// Whether `topic` is in the file with every one of `fields`, and has a sample where they are
+    /// all finite (`Some(false)`: present, no such sample; `None`: topic or a field missing).
+    fn usable(&self, topic: &str, fields: &[String]) -> Option<bool>;
+    /// The file's topics (for the message when no source is present).
+    fn topics(&self) -> Vec<String>;
+    /// A topic's fields, if the file has it.
+    fn fields(&self, topic: &str) -> Option<Vec<String>>;
+}
+
+impl Profile {
+    /// (topic, fields, note) of candidate `k` of channel `ch` (an index of [`CHANNELS`]); `None`
+    /// past the last candidate (or no battery mapping).
+    fn candidate_of(&self, ch: usize, k: usize) -> Option<(String, Vec<String>, String)> {
+        fn get<T: Source>(x: &T, k: usize) -> Option<(String, Vec<String>, String)> {
+            (k < x.candidates()).then(|| {
+                let c = x.candidate(k);
+                (c.topic().to_owned(), c.fields(), c.note().to_owned())
+            })
+        }
+        match ch {
+            0 => get(&self.position, k),
+            1 => get(&self.velocity, k),
+            2 => get(&self.attitude, k),
+            3 => get(&self.rates, k),
+            4 => get(&self.inputs.u_vz, k),
+            5 => get(&self.inputs.u_roll, k),
+            6 => get(&self.inputs.u_pitch, k),
+            7 => get(&self.inputs.u_yaw_rate, k),
+            _ => self.battery_voltage.as_ref().and_then(|b| get(b, k)),
+        }
+    }
+
+    /// This profile with channel `ch` taking candidate `k` (and no alternatives left there).
+    fn with_candidate(&self, ch: usize, k: usize) -> Profile {
+        let mut p = self.clone();
+        match ch {
+            0 => p.position = self.position.candidate(k),
+            1 => p.velocity = self.velocity.candidate(k),
+            2 => p.attitude = self.attitude.candidate(k),
+            3 => p.rates = self.rates.candidate(k),
+            4 => p.inputs.u_vz = self.inputs.u_vz.candidate(k),
+            5 => p.inputs.u_roll = self.inputs.u_roll.candidate(k),
+            6 => p.inputs.u_pitch = self.inputs.u_pitch.candidate(k),
+            7 => p.inputs.u_yaw_rate = self.inputs.u_yaw_rate.candidate(k),
+            _ => p.battery_voltage = self.battery_voltage.as_ref().map(|b| b.candidate(k)),
+        }
+        p
+    }
+
+    /// Whether any channel has alternatives.
+    pub fn has_alternatives(&self) -> bool {
+        (0..CHANNELS.len()).any(|ch| self.candidate_of(ch, 1).is_some())
+    }
+
+    /// The profile with one source per channel for a file: for each channel the first candidate
+    /// (itself, then its `or` list) whose topic and fields the file has with a finite sample, else
+    /// the first whose topic and fields it has, else itself (whose absence the import then
+    /// names). Also one line per channel saying which source was chosen (when the profile has
+    /// alternatives; empty otherwise). A channel none of whose several sources is in the file is an
+    /// error listing them.
+    pub fn choose(&self, file: &str, rec: &dyn Available) -> Result<(Profile, Vec<String>), ImportError> {
+        let mut out = self.clone();
+        let mut lines = Vec::new();
+        let report = self.has_alternatives();
+        for (ch, (name, columns)) in CHANNELS.iter().enumerate() {
+            let mut cands = Vec::new();
+            let mut k = 0;
+            while let Some(c) = self.candidate_of(ch, k) {
+                cands.push(c);
+                k += 1;
+            }
+            if cands.is_empty() {
+                continue;
+            }
+            let state: Vec<Option<bool>> = cands.iter().map(|(t, f, _)| rec.usable(t, f)).collect();
+            let pick = state
+                .iter()
+                .position(|s| *s == Some(true))
+                .or_else(|| state.iter().position(|s| s.is_some()));
+            let Some(pick) = pick else {
+                if cands.len() > 1 && ch < 8 {
+                    let listed: Vec<String> = cands
+                        .iter()
+                        .map(|(t, f, _)| match rec.fields(t) {
+                            None => format!("`{t}` ({}): no such topic", f.join(", ")),
+                            Some(have) => {
+                                let missing: Vec<&String> = f.iter().filter(|x| !have.contains(x)).collect();
+                                format!(
+                                    "`{t}` has no numeric field {} (its fields are {})",
+                                    super::error::list_names(&missing, 5),
+                                    super::error::list_names(&have, 40)
+                                )
+                            }
+                        })
+                        .collect();
+                    let topic_there = cands.iter().any(|(t, _, _)| rec.fields(t).is_some());
+                    return Err(ImportError::new(
+                        file,
+                        if topic_there {
+                            ImportErrorKind::MissingField
+                        } else {
+                            ImportErrorKind::MissingTopic
+                        },
+                        format!(
+                            "{columns}: none of profile `{}`'s sources for `{name}` is in this file: {}; the file has the topics {}",
+                            self.name,
+                            listed.join("; "),
+                            super::error::list_names(&rec.topics(), 60)
+                        ),
+                    ));
+                }
+                continue;
+            };
+            out = out.with_candidate(ch, pick);
+            if report {
+                let (t, f, note) = &cands[pick];
+                let which = match cands.len() {
+                    1 => String::new(),
+                    n => format!(
+                        " (source {} of {n}{})",
+                        pick + 1,
+                        if note.is_empty() {
+                            String::new()
+                        } else {
+                            format!(": {note}")
+                        }
+                    ),
+                };
+                lines.push(format!("{columns} ← `{t}` {}{which}", f.join(", ")));
+            }
+        }
+        Ok((out, lines))
     }
 }
 

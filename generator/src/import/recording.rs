@@ -29,6 +29,159 @@ pub struct Recording {
     pub broken: Option<String>,
     /// Notes for the report (e.g. topics with several instances, the one used).
     pub notes: Vec<String>,
+    /// Damaged stretches of the file that the reader skipped, resynchronising on the records
+    /// after them (a zero-filled block: the usual SD-card fault). Never silent: without
+    /// `--partial` the import is an error that says where and what was lost ([`Recording::damage_report`]).
+    pub damage: Vec<Damage>,
+}
+
+/// A stretch of a file that could not be read as records, skipped by the reader.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Damage {
+    /// First byte that could not be read (the start of the record the damage begins in).
+    pub from: usize,
+    /// First byte read again (the record the reader resynchronised on), or the file's end.
+    pub to: usize,
+    /// Whether the reader found records again after it (`false`: the rest of the file is lost).
+    pub resynced: bool,
+    /// Why the reader stopped at `from`.
+    pub why: String,
+    /// How many of the stretch's bytes are zero.
+    pub zeros: usize,
+    /// Requested topic → how many samples it had when the damage was met (its samples before).
+    pub marks: BTreeMap<String, usize>,
+}
+
+/// What one damaged stretch cost one topic.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Loss {
+    pub topic: String,
+    /// Samples missing (estimated from the gap and the topic's median period).
+    pub samples: usize,
+    /// The last sample before and the first after the damage (s); `None` after: to the end.
+    pub before: Option<f64>,
+    pub after: Option<f64>,
+    /// Seconds without a sample: `samples` × the median period.
+    pub seconds: f64,
+}
+
+impl Damage {
+    /// A damaged stretch met at byte `from`; `marks` from the readers' builders.
+    pub fn new(from: usize, why: String, builders: &BTreeMap<String, SeriesBuilder>) -> Damage {
+        Damage {
+            from,
+            to: from,
+            resynced: false,
+            why,
+            zeros: 0,
+            marks: builders.iter().map(|(t, b)| (t.clone(), b.series.t.len())).collect(),
+        }
+    }
+
+    /// Close the stretch at `to` (`resynced`: records are read again from there).
+    pub fn close(&mut self, bytes: &[u8], to: usize, resynced: bool) {
+        self.to = to.max(self.from);
+        self.resynced = resynced;
+        self.zeros = bytes
+            .get(self.from..self.to)
+            .map_or(0, |b| b.iter().filter(|x| **x == 0).count());
+    }
+
+    /// The samples each requested topic lost here (topics that lost none are left out).
+    pub fn losses(&self, series: &BTreeMap<String, Series>) -> Vec<Loss> {
+        let mut out = Vec::new();
+        for (topic, &n) in &self.marks {
+            let Some(s) = series.get(topic) else { continue };
+            let before = n.checked_sub(1).and_then(|i| s.t.get(i)).copied();
+            let after = if self.resynced { s.t.get(n).copied() } else { None };
+            let steps: Vec<f64> = s.t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+            let period = crate::logs::median(&steps);
+            let (samples, seconds) = match (before, after, period) {
+                (Some(a), Some(b), Some(p)) => {
+                    let k = (((b - a) / p).round() as usize).saturating_sub(1);
+                    (k, k as f64 * p)
+                }
+                // Nothing after the damage: everything the topic would have logged to the end.
+                (_, None, _) if !self.resynced => {
+                    let end = series
+                        .values()
+                        .filter_map(|s| s.t.last())
+                        .fold(f64::NAN, |m, t| m.max(*t));
+                    let from = before.unwrap_or(f64::NAN);
+                    let k = match period {
+                        Some(p) if end > from => ((end - from) / p).round() as usize,
+                        _ => 0,
+                    };
+                    // Whatever came after the last sample read is unknown: at least one sample.
+                    (k.max(1), period.map_or(0.0, |p| k.max(1) as f64 * p))
+                }
+                _ => (0, 0.0),
+            };
+            if samples > 0 {
+                out.push(Loss {
+                    topic: topic.clone(),
+                    samples,
+                    before,
+                    after,
+                    seconds,
+                });
+            }
+        }
+        out
+    }
+
+    /// One sentence: where, how many bytes, what was lost.
+    pub fn describe(&self, series: &BTreeMap<String, Series>, format: &str) -> String {
+        let unit = format!("{format} record");
+        let len = self.to - self.from;
+        let kind = if len > 0 && self.zeros * 10 >= len * 9 {
+            ", zero-filled"
+        } else {
+            ""
+        };
+        let span = if self.resynced {
+            format!(
+                "bytes {} … {} ({len} bytes{kind}) cannot be read as {unit}s, the reader resumes at byte {}",
+                self.from, self.to, self.to
+            )
+        } else {
+            format!(
+                "from byte {} to the end ({len} bytes{kind}) nothing can be read as {unit}s",
+                self.from
+            )
+        };
+        let losses = self.losses(series);
+        let lost = if losses.is_empty() {
+            "no sample of a mapped topic is lost (only records of other topics)".to_owned()
+        } else {
+            let parts: Vec<String> = losses
+                .iter()
+                .map(|l| {
+                    let fmt = |t: Option<f64>| t.map_or("?".to_owned(), |t| format!("{t}"));
+                    match l.after {
+                        Some(_) => format!(
+                            "`{}` {} sample{}, {:.3} s (none between t = {} and {} s)",
+                            l.topic,
+                            l.samples,
+                            if l.samples == 1 { "" } else { "s" },
+                            l.seconds,
+                            fmt(l.before),
+                            fmt(l.after)
+                        ),
+                        None => format!(
+                            "`{}` everything after t = {} s (about {} samples, {:.3} s)",
+                            l.topic,
+                            fmt(l.before),
+                            l.samples,
+                            l.seconds
+                        ),
+                    }
+                })
+                .collect();
+            format!("lost: {}", parts.join("; "))
+        };
+        format!("damaged at byte {}: {} ({}); {lost}", self.from, span, self.why)
+    }
 }
 
 impl Recording {
@@ -38,6 +191,14 @@ impl Recording {
             format,
             ..Self::default()
         }
+    }
+
+    /// Every damaged stretch in one line each (empty: none).
+    pub fn damage_report(&self) -> Vec<String> {
+        self.damage
+            .iter()
+            .map(|d| d.describe(&self.series, self.format))
+            .collect()
     }
 
     /// The series of a topic with the named fields; errors name what is missing and list what the
@@ -138,5 +299,30 @@ impl SeriesBuilder {
         self.series.t.push(t);
         self.last_where = at();
         Ok(())
+    }
+}
+
+impl super::profile::Available for Recording {
+    fn usable(&self, topic: &str, fields: &[String]) -> Option<bool> {
+        let available = self.available.get(topic)?;
+        if !fields.iter().all(|f| available.contains(f)) {
+            return None;
+        }
+        let Some(series) = self.series.get(topic) else {
+            return Some(false);
+        };
+        let columns: Vec<&Vec<f64>> = fields.iter().filter_map(|f| series.fields.get(f)).collect();
+        if columns.len() != fields.len() {
+            return Some(false);
+        }
+        Some((0..series.t.len()).any(|i| columns.iter().all(|c| c[i].is_finite())))
+    }
+
+    fn topics(&self) -> Vec<String> {
+        self.available.keys().cloned().collect()
+    }
+
+    fn fields(&self, topic: &str) -> Option<Vec<String>> {
+        self.available.get(topic).cloned()
     }
 }

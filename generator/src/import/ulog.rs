@@ -9,14 +9,93 @@
 //! Time is the message's `timestamp` field (µs since boot) in s.
 
 use super::error::{ImportError, ImportErrorKind};
-use super::recording::{Recording, SeriesBuilder};
+use super::recording::{Damage, Recording, SeriesBuilder};
 use px4_ulog::stream_parser::model::{FlattenedFieldType, FlattenedFormat};
 use px4_ulog::stream_parser::{DataMessage, LittleEndianParser, LogParser};
 use std::cell::RefCell;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 /// The first 7 bytes of every ULog file.
 pub const MAGIC: [u8; 7] = [b'U', b'L', b'o', b'g', 0x01, 0x12, 0x35];
+
+/// The payload of every `S` (sync) record.
+pub const SYNC_MAGIC: [u8; 8] = [0x2F, 0x73, 0x13, 0x20, 0x25, 0x0C, 0xBB, 0x12];
+
+/// Records in a row that must be plausible where the reader resumes after a damaged stretch.
+const RESYNC_CHAIN: usize = 4;
+
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect::<Vec<_>>().join(" ")
+}
+
+/// The msg_id an `A` (subscription) record at `pos` adds, if it is one.
+fn subscribed(bytes: &[u8], pos: usize) -> Option<u16> {
+    let h = bytes.get(pos..pos + 6)?;
+    (h[2] == b'A' && u16::from_le_bytes([h[0], h[1]]) >= 4).then(|| u16::from_le_bytes([h[4], h[5]]))
+}
+
+/// Whether a plausible record head of the data section is at `pos` (its end within the file is
+/// not checked here): a known kind with a payload of the kind's size, a `D` record of a
+/// subscribed msg_id (of the size its earlier records had), an `S` record with the sync magic.
+/// `pending`: a msg_id subscribed by the record just before. `strict` (resynchronising): unknown
+/// kinds are not accepted (a reader skips them otherwise, as the format asks).
+fn plausible(bytes: &[u8], pos: usize, subs: &HashMap<u16, Option<usize>>, pending: Option<u16>, strict: bool) -> bool {
+    let Some(h) = bytes.get(pos..pos + 3) else { return false };
+    let size = u16::from_le_bytes([h[0], h[1]]) as usize;
+    let payload = bytes.get(pos + 3..).unwrap_or(&[]);
+    let payload = &payload[..payload.len().min(size)];
+    let printable = |b: &[u8]| b.iter().all(|c| (0x20..0x7f).contains(c));
+    match h[2] {
+        b'D' => {
+            let Some(id) = payload.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]])) else {
+                return false;
+            };
+            match subs.get(&id) {
+                Some(Some(known)) => size == *known,
+                Some(None) => size >= 10,
+                None => pending == Some(id) && size >= 10,
+            }
+        }
+        b'A' => size >= 4 && payload.len() >= 4 && printable(&payload[3..]),
+        b'R' | b'O' => size == 2,
+        b'S' => size == 8 && payload == SYNC_MAGIC,
+        // Logged strings: a log level and a 64-bit time stamp (`C`: and a tag) before the text.
+        b'L' => size >= 9 && (!strict || printable(payload.get(9..).unwrap_or(&[]))),
+        b'C' => size >= 11 && (!strict || printable(payload.get(11..).unwrap_or(&[]))),
+        // Resynchronising, only the kinds above: their checks are strong enough for bytes that
+        // are not records (a double's bytes) to fail them.
+        _ if strict => false,
+        // Information and parameters: a key length and a key (`M`, `Q`: a flag byte first).
+        b'I' | b'P' => size >= 2 && payload.len() >= 2 && (payload[0] as usize) < size,
+        b'M' | b'Q' => size >= 3 && payload.len() >= 3 && (payload[1] as usize) + 1 < size,
+        b'F' => size >= 3 && printable(payload),
+        k => k.is_ascii_alphabetic() && size > 0,
+    }
+}
+
+/// The first byte at or after `from` where [`RESYNC_CHAIN`] plausible records follow one another
+/// (or fewer that end exactly at `end`).
+fn resync(bytes: &[u8], from: usize, end: usize, subs: &HashMap<u16, Option<usize>>) -> Option<usize> {
+    let chain = |q: usize| {
+        let mut p = q;
+        let mut pending = None;
+        for i in 0..RESYNC_CHAIN {
+            if p == end {
+                return i > 0;
+            }
+            if p + 3 > end || !plausible(&bytes[..end], p, subs, pending, true) {
+                return false;
+            }
+            pending = subscribed(bytes, p);
+            p += 3 + u16::from_le_bytes([bytes[p], bytes[p + 1]]) as usize;
+            if p > end {
+                return false;
+            }
+        }
+        true
+    };
+    (from..end.saturating_sub(2)).find(|&q| chain(q))
+}
 
 /// How to read one requested field of one msg_id.
 struct FieldPlan {
@@ -170,6 +249,8 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)]) -> Result<Reco
                 "the ULog header (bytes 0..16) cannot be read",
             ));
         }
+        // msg_id → the size of its `D` records, once one was read (`None`: subscribed, no data yet).
+        let mut subs: HashMap<u16, Option<usize>> = HashMap::new();
         let mut pos = 16usize;
         let mut end = bytes.len();
         while pos < end {
@@ -182,40 +263,68 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)]) -> Result<Reco
             }
             let size = u16::from_le_bytes([bytes[pos], bytes[pos + 1]]) as usize;
             let kind = bytes[pos + 2];
-            if end - pos < 3 + size {
+            let next = pos + 3 + size;
+            // A record is read only when its head and the head after it are plausible: a damaged
+            // stretch (zeros, garbage) may begin inside the record before the first bad head.
+            let problem = if !plausible(bytes, pos, &subs, None, false) {
+                Some(format!(
+                    "no valid ULog record at byte {pos} (head {})",
+                    hex(&bytes[pos..pos + 3])
+                ))
+            } else if next > end {
                 rec.broken = Some(format!(
                     "the file is truncated: the `{}` record at byte {pos} announces {size} bytes, {} are left",
                     kind as char,
                     end - pos - 3
                 ));
                 break;
-            }
-            state.borrow_mut().offset = pos;
-            let result = feed(&mut parser, &bytes[pos..pos + 3 + size]);
-            let problem = match result {
-                Ok(Ok(())) => None,
-                Ok(Err(e)) => Some(e.description),
-                Err(_) => Some("the ULog parser failed on it".to_owned()),
-            };
-            if let Some(e) = state.borrow_mut().error.take() {
-                return Err(e);
-            }
-            if let Some(problem) = problem {
-                let what = format!(
-                    "the `{}` record at byte {pos} cannot be decoded: {problem}",
+            } else if next + 3 <= end && !plausible(bytes, next, &subs, subscribed(bytes, pos), false) {
+                Some(format!(
+                    "no valid ULog record at byte {next} (head {}) after the `{}` record at byte {pos}",
+                    hex(&bytes[next..(next + 5).min(end)]),
                     kind as char
-                );
-                if parser.in_data() {
-                    rec.broken = Some(what);
-                    break;
+                ))
+            } else {
+                state.borrow_mut().offset = pos;
+                let result = feed(&mut parser, &bytes[pos..next]);
+                let failed = match result {
+                    Ok(Ok(())) => None,
+                    Ok(Err(e)) => Some(e.description),
+                    Err(_) => Some("the ULog parser failed on it".to_owned()),
+                };
+                if let Some(e) = state.borrow_mut().error.take() {
+                    return Err(e);
                 }
-                return Err(ImportError::new(
-                    file,
-                    ImportErrorKind::Corrupt,
-                    format!("{what} (in the definitions section, before any data)"),
-                ));
+                failed.map(|f| format!("the `{}` record at byte {pos} cannot be decoded: {f}", kind as char))
+            };
+            if let Some(problem) = problem {
+                if !parser.in_data() {
+                    return Err(ImportError::new(
+                        file,
+                        ImportErrorKind::Corrupt,
+                        format!("{problem} (in the definitions section, before any data)"),
+                    ));
+                }
+                let mut damage = Damage::new(pos, problem, &state.borrow().builders);
+                let resume = resync(bytes, pos + 1, end, &subs);
+                damage.close(bytes, resume.unwrap_or(end), resume.is_some());
+                rec.damage.push(damage);
+                match resume {
+                    Some(q) => {
+                        pos = q;
+                        continue;
+                    }
+                    None => break,
+                }
             }
-            pos += 3 + size;
+            if let Some(id) = subscribed(bytes, pos) {
+                subs.entry(id).or_insert(None);
+            }
+            if kind == b'D' && size >= 2 {
+                let id = u16::from_le_bytes([bytes[pos + 3], bytes[pos + 4]]);
+                subs.insert(id, Some(size));
+            }
+            pos = next;
             // Appended data (crash dumps) starts at the first non-zero appended offset.
             if let Some(&first) = parser.appended_offsets().iter().find(|o| **o != 0) {
                 let first = first as usize;

@@ -4,8 +4,10 @@
 mod bag_writer;
 #[path = "../common/mod.rs"]
 mod common;
+mod corruption;
 mod dataflash_writer;
 mod mcap_writer;
+mod older_px4;
 mod ulog_writer;
 
 use bag_writer::{BagWriter, Ros1};
@@ -260,6 +262,20 @@ fn missing_topic_and_field_are_named_with_what_the_file_has() {
     );
     let e = import(&w.bytes, "a.ulg", &ImportOptions::default()).unwrap_err();
     assert_eq!(e.kind, ImportErrorKind::MissingTopic);
+    // The px4 preset has older sources for u_vz: the error lists every one.
+    assert!(
+        e.message.starts_with(
+            "u_vz: none of profile `px4`'s sources for `inputs.u_vz` is in this file: `trajectory_setpoint` (velocity[2]): no such topic; `trajectory_setpoint` (vz): no such topic; `vehicle_local_position_setpoint` (vz): no such topic; the file has the topics "
+        ),
+        "{e}"
+    );
+    assert!(e.message.contains("`vehicle_attitude`"), "lists the topics: {e}");
+    // A profile without alternatives names the one topic.
+    let mut one = px4();
+    one.inputs.u_vz.alternatives.clear();
+    one.inputs.u_yaw_rate.alternatives.clear();
+    let e = import_bytes("a.ulg", Some(Format::Ulog), &w.bytes, &one, &ImportOptions::default()).unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::MissingTopic);
     assert!(
         e.message
             .contains("topic `trajectory_setpoint` is not in this PX4 ULog file"),
@@ -278,11 +294,15 @@ fn missing_topic_and_field_are_named_with_what_the_file_has() {
     assert_eq!(e.kind, ImportErrorKind::MissingField);
     assert!(
         e.message
-            .contains("topic `trajectory_setpoint` has no numeric field `yawspeed`"),
+            .contains("`trajectory_setpoint` has no numeric field `yawspeed` (its fields are "),
         "{e}"
     );
     assert!(
         e.message.contains("`yaw_rate`") && e.message.contains("`velocity[2]`"),
+        "{e}"
+    );
+    assert!(
+        e.message.contains("`vehicle_rates_setpoint` (yaw): no such topic"),
         "{e}"
     );
 }
@@ -348,12 +368,36 @@ fn corrupt_record_is_located() {
     bytes[at + 3] = 0x77;
     let e = import(&bytes, "bad.ulg", &ImportOptions::default()).unwrap_err();
     assert_eq!(e.kind, ImportErrorKind::Corrupt);
+    // The record before it is dropped too (the damage may begin inside it); the reader resumes
+    // at the record after it and says what was lost.
+    let (prev, _) = w.data_offsets[299];
+    let (next, _) = w.data_offsets[301];
     assert!(
-        e.message
-            .contains(&format!("the `D` record at byte {at} cannot be decoded")),
+        e.message.starts_with(&format!(
+            "damaged at byte {prev}: bytes {prev} … {next} ({} bytes) cannot be read as PX4 ULog records, the reader resumes at byte {next} (no valid ULog record at byte {at} (head ",
+            next - prev
+        )),
         "{e}"
     );
-    assert!(e.message.contains("unregistered msg_id"), "{e}");
+    assert!(
+        e.message
+            .contains(&format!("after the `D` record at byte {prev}); lost: `")),
+        "{e}"
+    );
+    // A definitions record that cannot be decoded is an error even with --partial.
+    let mut bytes = w.bytes.clone();
+    let f = 16 + 3 + 40;
+    assert_eq!(bytes[f + 2], b'F');
+    bytes[f + 3..f + 8].copy_from_slice(b"\xff\xff:::");
+    let partial = ImportOptions {
+        partial: true,
+        ..ImportOptions::default()
+    };
+    let e = import(&bytes, "def.ulg", &partial).unwrap_err();
+    assert!(
+        e.message.contains("(in the definitions section, before any data)"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -849,15 +893,37 @@ fn dataflash_errors_say_where() {
         ..ImportOptions::default()
     };
     assert!(import_with("ardupilot", cut, "cut.bin", &partial).unwrap().rows() >= 240);
-    // A corrupt record head.
+    // A corrupt record head: the record before it is suspect too (the damage may begin inside
+    // it); both are skipped, the reader resumes at the next whole records, and says what was lost.
     let mut bad = w.bytes.clone();
     bad[at] = 0x00;
+    let (prev, _) = w.offsets[1999];
     let e = import_with("ardupilot", &bad, "bad.bin", &ImportOptions::default()).unwrap_err();
+    assert_eq!(e.kind, ImportErrorKind::Corrupt);
     assert!(
         e.message.contains(&format!(
-            "the file is corrupt at byte {at}: 00 95 where a record head A3 95 should be"
+            "damaged at byte {prev}: bytes {prev} … {} ",
+            w.offsets[2001].0
+        )) && e.message.contains(&format!(
+            "(00 95 at byte {at}, after the record at byte {prev}, where a record head A3 95 should be); lost: `"
         )),
         "{e}"
+    );
+    assert!(e.message.contains("pass --partial to import the "), "{e}");
+    let i = import_bytes(
+        "bad.bin",
+        Some(Format::DataFlash),
+        &bad,
+        &Profile::resolve("ardupilot").unwrap(),
+        &partial,
+    )
+    .unwrap();
+    assert_eq!(i.damaged.len(), 1, "{:?}", i.damaged);
+    assert!(
+        i.rows.len() + 5
+            > import_with("ardupilot", &w.bytes, "f.bin", &ImportOptions::default())
+                .unwrap()
+                .rows()
     );
     // A missing message lists what the log has.
     let mut profile = Profile::resolve("ardupilot").unwrap();
@@ -1009,11 +1075,23 @@ fn write_fuzz_seeds() {
     let opts = uavgen::sim::SimulateOptions::parse("excite", "1.5", 3).unwrap();
     let sim = parse_log(&uavgen::sim::simulate(&plant, &opts).unwrap().to_csv(), "sim.csv").unwrap();
     let corpus = repo().join("fuzz/corpus");
-    let seeds: [(&str, Vec<u8>); 4] = [
-        ("import_ulog/flight.ulg", px4_ulog(&sim, &Px4Fixture::default()).bytes),
+    // Damaged copies (300 zero bytes at 40 %) exercise the resynchronising readers.
+    let zeroed = |mut b: Vec<u8>| {
+        let at = b.len() * 2 / 5;
+        b[at..at + 300].fill(0);
+        b
+    };
+    let ulog = px4_ulog(&sim, &Px4Fixture::default()).bytes;
+    let bag = dji_bag(&sim, 20).finish();
+    let bin = ardupilot_bin(&sim).bytes;
+    let seeds: [(&str, Vec<u8>); 7] = [
+        ("import_ulog/flight.ulg", ulog.clone()),
+        ("import_ulog/zeroed.ulg", zeroed(ulog)),
         ("import_mcap/flight.mcap", mavros_mcap(&sim, false, None)),
-        ("import_bag/flight.bag", dji_bag(&sim, 20).finish()),
-        ("import_dataflash/flight.bin", ardupilot_bin(&sim).bytes),
+        ("import_bag/flight.bag", bag.clone()),
+        ("import_bag/zeroed.bag", zeroed(bag)),
+        ("import_dataflash/flight.bin", bin.clone()),
+        ("import_dataflash/zeroed.bin", zeroed(bin)),
     ];
     for (name, bytes) in seeds {
         assert!(
