@@ -274,95 +274,106 @@ impl Row {
         }
     }
 
-    /// ṙ = Σ θ_i φ_i(v) at the variable vector v (12 states, 4 inputs), the terms in `fixed`
-    /// taken from there (the same sum, term by term in order).
-    fn rate(&self, theta: &[f64], v: &[f64; 16], fixed: &[f64]) -> f64 {
-        self.terms
-            .iter()
-            .zip(theta)
-            .zip(&self.fixed_column)
-            .map(|((t, c), col)| {
-                c * match col {
-                    Some(j) => fixed[*j],
-                    None => eval_term(t, v),
-                }
-            })
-            .sum()
-    }
-
-    /// One RK4 step of the loop from `s` = (output, rate) over an interval of period `dt`:
-    /// `v[point]` the variables at the interval's start, middle and end (the other states
-    /// linearly interpolated between x_k and x_{k+1}; needed only by terms that mix a loop state
-    /// with another variable), `fixed[point]` the terms without a loop state there.
-    fn step(&self, theta: &[f64], v: &[[f64; 16]; 3], fixed: [&[f64]; 3], dt: f64, s: [f64; 2]) -> [f64; 2] {
-        let f = |point: usize, s: [f64; 2]| -> [f64; 2] {
-            let mut v = v[point];
-            if self.lp.has_angle() {
-                v[self.lp.output] = s[0];
-                v[self.lp.row] = s[1];
-                [s[1], self.rate(theta, &v, fixed[point])]
-            } else {
-                v[self.lp.row] = s[1];
-                [0.0, self.rate(theta, &v, fixed[point])]
-            }
-        };
-        let k1 = f(0, s);
-        let k2 = f(1, [s[0] + 0.5 * dt * k1[0], s[1] + 0.5 * dt * k1[1]]);
-        let k3 = f(1, [s[0] + 0.5 * dt * k2[0], s[1] + 0.5 * dt * k2[1]]);
-        let k4 = f(2, [s[0] + dt * k3[0], s[1] + dt * k3[1]]);
-        [
-            s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
-            s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
-        ]
-    }
-
     /// The free-run residuals y_sim − y_log of every window, appended to `out`.
     fn residuals(&self, theta: &[f64], data: &Dataset, windows: &[Window], h: usize, out: &mut Vec<f64>) {
         self.residuals_of(&[theta], data, windows, h, std::slice::from_mut(out));
     }
 
-    /// [`Row::residuals`] of several coefficient vectors at once (`outs[i]` those of `thetas[i]`):
-    /// the runs of one window advance side by side, sharing the interpolated variables and the
-    /// fixed terms of each interval, and their independent sums overlap in the processor. Every
-    /// run computes what it would alone, in the same order.
+    /// [`Row::residuals`] of several coefficient vectors at once (`outs[i]` those of `thetas[i]`).
+    ///
+    /// Every free run is one RK4 step per interval k of the loop's (output, rate), ṙ = Σ θ_i φ_i(v)
+    /// at the interval's start, middle (twice) and end, v the other states linearly interpolated
+    /// between x_k and x_{k+1} and the interval's inputs. The runs of one window advance side by
+    /// side: at each stage the sums of all runs are formed term by term (the runs innermost, so
+    /// that the processor overlaps or vectorises them), the fixed terms read once from the
+    /// table. Each run's sum is the same products added in the same order as Σ over its terms
+    /// alone, so every run is bit for bit what it would be on its own.
     fn residuals_of(&self, thetas: &[&[f64]], data: &Dataset, windows: &[Window], h: usize, outs: &mut [Vec<f64>]) {
         for out in outs.iter_mut() {
             out.clear();
         }
+        let n = thetas.len();
+        let p = self.terms.len();
+        if n == 0 {
+            return;
+        }
+        let angle = self.lp.has_angle();
+        let (row, output) = (self.lp.row, self.lp.output);
         // Whether a term mixes a loop state with another variable (else no interpolation).
         let mixed = self.fixed_column.iter().zip(&self.terms).any(|(c, t)| {
             c.is_none()
                 && t.factors.iter().any(|&(base, _)| match base {
-                    Base::Var(i) | Base::Sin(i) | Base::Cos(i) => {
-                        i != self.lp.row && !(self.lp.has_angle() && i == self.lp.output)
-                    }
+                    Base::Var(i) | Base::Sin(i) | Base::Cos(i) => i != row && !(angle && i == output),
                 })
         });
-        let mut states = vec![[0.0; 2]; thetas.len()];
+        let free_terms = self.fixed_column.iter().any(|c| c.is_none());
+        // coef[i n + r]: term i's coefficient in run r.
+        let coef: Vec<f64> = (0..p).flat_map(|i| thetas.iter().map(move |t| t[i])).collect();
+        let mut s = vec![[0.0; 2]; n];
+        let mut at = vec![[0.0; 2]; n];
+        let mut slopes = vec![[[0.0; 2]; 4]; n];
+        let mut acc = vec![0.0; n];
+        let mut vs = vec![[0.0; 16]; n];
         for w in windows {
             let seg = &data.segments[w.seg];
             let table = &self.fixed[w.seg];
+            let dt = seg.dt;
             let x = &seg.x[w.start];
-            states.fill([x[self.lp.output], x[self.lp.row]]);
+            s.fill([x[output], x[row]]);
             for k in w.start..w.start + h {
                 let v = if mixed {
                     RK4_POINTS.map(|frac| interpolated(seg, k, frac))
                 } else {
                     [[0.0; 16]; 3]
                 };
-                let fixed = [0, 1, 2].map(|point| {
-                    let at = (3 * k + point) * self.columns;
-                    if self.columns > 0 {
-                        &table[at..at + self.columns]
-                    } else {
-                        &[][..]
+                for (stage, point) in [0usize, 1, 1, 2].into_iter().enumerate() {
+                    for ((a, s), sl) in at.iter_mut().zip(&s).zip(&slopes) {
+                        *a = match stage {
+                            0 => *s,
+                            1 => [s[0] + 0.5 * dt * sl[0][0], s[1] + 0.5 * dt * sl[0][1]],
+                            2 => [s[0] + 0.5 * dt * sl[1][0], s[1] + 0.5 * dt * sl[1][1]],
+                            _ => [s[0] + dt * sl[2][0], s[1] + dt * sl[2][1]],
+                        };
                     }
-                });
-                let y_log = seg.x_next[k][self.lp.output];
-                for ((theta, s), out) in thetas.iter().zip(states.iter_mut()).zip(outs.iter_mut()) {
-                    *s = self.step(theta, &v, fixed, seg.dt, *s);
-                    let y = if self.lp.has_angle() { s[0] } else { s[1] };
-                    out.push(y - y_log);
+                    if free_terms {
+                        for (vr, a) in vs.iter_mut().zip(&at) {
+                            *vr = v[point];
+                            if angle {
+                                vr[output] = a[0];
+                            }
+                            vr[row] = a[1];
+                        }
+                    }
+                    let fixed = &table[(3 * k + point) * self.columns..(3 * k + point + 1) * self.columns];
+                    acc.fill(-0.0);
+                    for (i, (term, column)) in self.terms.iter().zip(&self.fixed_column).enumerate() {
+                        let c = &coef[i * n..(i + 1) * n];
+                        match column {
+                            Some(j) => {
+                                let phi = fixed[*j];
+                                for (a, c) in acc.iter_mut().zip(c) {
+                                    *a += c * phi;
+                                }
+                            }
+                            None => {
+                                for ((a, c), vr) in acc.iter_mut().zip(c).zip(&vs) {
+                                    *a += c * eval_term(term, vr);
+                                }
+                            }
+                        }
+                    }
+                    for ((sl, a), rate) in slopes.iter_mut().zip(&at).zip(&acc) {
+                        sl[stage] = if angle { [a[1], *rate] } else { [0.0, *rate] };
+                    }
+                }
+                let y_log = seg.x_next[k][output];
+                for ((s, sl), out) in s.iter_mut().zip(&slopes).zip(outs.iter_mut()) {
+                    let (k1, k2, k3, k4) = (sl[0], sl[1], sl[2], sl[3]);
+                    *s = [
+                        s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+                        s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+                    ];
+                    out.push(if angle { s[0] } else { s[1] } - y_log);
                 }
             }
         }
@@ -697,7 +708,7 @@ mod tests {
         let lp = LOOPS[1];
         let h = 30;
         let row = Row::new(lp, terms.clone(), theta0.clone(), &data, h);
-        assert_eq!(row.columns, 3);
+        assert_eq!(row.columns, 4);
         let windows: Vec<Window> = (0..2)
             .flat_map(|seg| (0..250).step_by(7).map(move |start| Window { seg, start }))
             .collect();
