@@ -34,7 +34,7 @@
 //! move; on the M100 logs the attitude rows do.
 
 use super::dataset::{Dataset, SegmentData};
-use crate::model::{parse_term, Coefficient, Term, DEFAULT_INPUTS, DEFAULT_STATES};
+use crate::model::{parse_term, Base, Coefficient, Term, DEFAULT_INPUTS, DEFAULT_STATES};
 use nalgebra::{DMatrix, DVector};
 
 /// One loop: the row a command drives and the state its free runs are judged by.
@@ -172,63 +172,209 @@ struct Window {
     start: usize,
 }
 
-/// The loop's row as parsed terms and their coefficients.
+/// The loop's row as parsed terms and their coefficients, and the values of the terms that do
+/// not involve the loop's own states at every sample of the data (see [`Row::new`]).
 struct Row {
     lp: Loop,
     terms: Vec<Term>,
     theta0: Vec<f64>,
+    /// Per term: its column in [`Row::fixed`]'s tables, or `None` when it involves a loop state
+    /// (evaluated along each free run).
+    fixed_column: Vec<Option<usize>>,
+    /// Per segment of the data, the terms that do not involve the loop's states at the three
+    /// points RK4 evaluates of every interval k (the interval's start, middle and end):
+    /// `[(3 k + point) * columns + column]`; empty for a segment no window runs on.
+    fixed: Vec<Vec<f64>>,
+    /// Columns of `fixed`.
+    columns: usize,
+}
+
+/// The fractions of an interval RK4 evaluates the row at (start, middle, end).
+const RK4_POINTS: [f64; 3] = [0.0, 0.5, 1.0];
+
+/// A term's value at `v` (what [`super::sindy::eval_term`] computes, bit for bit: a first power
+/// is the base itself, as `powi(1)` gives it).
+fn eval_term(term: &Term, v: &[f64; 16]) -> f64 {
+    let mut r = 1.0;
+    for &(base, power) in &term.factors {
+        let b = match base {
+            Base::Var(i) => v[i],
+            Base::Sin(i) => v[i].sin(),
+            Base::Cos(i) => v[i].cos(),
+        };
+        r *= if power == 1 { b } else { b.powi(power as i32) };
+    }
+    r
+}
+
+/// Whether `term` reads the variable `var`.
+fn reads(term: &Term, var: usize) -> bool {
+    term.factors.iter().any(|&(base, _)| match base {
+        Base::Var(i) | Base::Sin(i) | Base::Cos(i) => i == var,
+    })
+}
+
+/// The variables at fraction `frac` of interval k of `seg`: states linearly interpolated between
+/// x_k and x_{k+1}, the interval's inputs.
+fn interpolated(seg: &SegmentData, k: usize, frac: f64) -> [f64; 16] {
+    let (x0, x1) = (&seg.x[k], &seg.x_next[k]);
+    let mut v = [0.0; 16];
+    for i in 0..12 {
+        v[i] = x0[i] + frac * (x1[i] - x0[i]);
+    }
+    v[12..].copy_from_slice(&seg.u[k]);
+    v
 }
 
 impl Row {
-    /// ṙ = Σ θ_i φ_i(v) at the full variable vector v (12 states, 4 inputs).
-    fn rate(&self, theta: &[f64], v: &[f64; 16]) -> f64 {
-        self.terms
+    /// The row of loop `lp`; the terms that involve neither the row's state nor (with an angle)
+    /// the judged state are the same on every free run through a sample, so they are evaluated
+    /// once per sample of `data` here instead of on every run (the refinement runs each window
+    /// p + 1 times per Levenberg–Marquardt iteration).
+    fn new(lp: Loop, terms: Vec<Term>, theta0: Vec<f64>, data: &Dataset, h: usize) -> Self {
+        let mut columns = 0;
+        let fixed_column: Vec<Option<usize>> = terms
             .iter()
-            .zip(theta)
-            .map(|(t, c)| c * super::sindy::eval_term(t, v))
-            .sum()
-    }
-
-    /// One RK4 step of the loop over interval k of `seg` from `s` = (output, rate): the other
-    /// states linearly interpolated between x_k and x_{k+1}.
-    fn step(&self, theta: &[f64], seg: &SegmentData, k: usize, s: [f64; 2]) -> [f64; 2] {
-        let (x0, x1, u, dt) = (&seg.x[k], &seg.x_next[k], &seg.u[k], seg.dt);
-        let f = |frac: f64, s: [f64; 2]| -> [f64; 2] {
-            let mut v = [0.0; 16];
-            for i in 0..12 {
-                v[i] = x0[i] + frac * (x1[i] - x0[i]);
-            }
-            v[12..].copy_from_slice(u);
-            if self.lp.has_angle() {
-                v[self.lp.output] = s[0];
-                v[self.lp.row] = s[1];
-                [s[1], self.rate(theta, &v)]
-            } else {
-                v[self.lp.row] = s[1];
-                [0.0, self.rate(theta, &v)]
-            }
-        };
-        let k1 = f(0.0, s);
-        let k2 = f(0.5, [s[0] + 0.5 * dt * k1[0], s[1] + 0.5 * dt * k1[1]]);
-        let k3 = f(0.5, [s[0] + 0.5 * dt * k2[0], s[1] + 0.5 * dt * k2[1]]);
-        let k4 = f(1.0, [s[0] + dt * k3[0], s[1] + dt * k3[1]]);
-        [
-            s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
-            s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
-        ]
+            .map(|t| {
+                let free = reads(t, lp.row) || (lp.has_angle() && reads(t, lp.output));
+                (!free).then(|| {
+                    columns += 1;
+                    columns - 1
+                })
+            })
+            .collect();
+        let fixed = data
+            .segments
+            .iter()
+            .map(|seg| {
+                if columns == 0 || seg.x_next.len() != seg.x.len() || seg.x.len() < h {
+                    return Vec::new();
+                }
+                let mut table = Vec::with_capacity(seg.x.len() * 3 * columns);
+                for k in 0..seg.x.len() {
+                    for frac in RK4_POINTS {
+                        let v = interpolated(seg, k, frac);
+                        for (t, c) in terms.iter().zip(&fixed_column) {
+                            if c.is_some() {
+                                table.push(eval_term(t, &v));
+                            }
+                        }
+                    }
+                }
+                table
+            })
+            .collect();
+        Self {
+            lp,
+            terms,
+            theta0,
+            fixed_column,
+            fixed,
+            columns,
+        }
     }
 
     /// The free-run residuals y_sim − y_log of every window, appended to `out`.
     fn residuals(&self, theta: &[f64], data: &Dataset, windows: &[Window], h: usize, out: &mut Vec<f64>) {
-        out.clear();
+        self.residuals_of(&[theta], data, windows, h, std::slice::from_mut(out));
+    }
+
+    /// [`Row::residuals`] of several coefficient vectors at once (`outs[i]` those of `thetas[i]`).
+    ///
+    /// Every free run is one RK4 step per interval k of the loop's (output, rate), ṙ = Σ θ_i φ_i(v)
+    /// at the interval's start, middle (twice) and end, v the other states linearly interpolated
+    /// between x_k and x_{k+1} and the interval's inputs. The runs of one window advance side by
+    /// side: at each stage the sums of all runs are formed term by term (the runs innermost, so
+    /// that the processor overlaps or vectorises them), the fixed terms read once from the
+    /// table. Each run's sum is the same products added in the same order as Σ over its terms
+    /// alone, so every run is bit for bit what it would be on its own.
+    fn residuals_of(&self, thetas: &[&[f64]], data: &Dataset, windows: &[Window], h: usize, outs: &mut [Vec<f64>]) {
+        for out in outs.iter_mut() {
+            out.clear();
+        }
+        let n = thetas.len();
+        let p = self.terms.len();
+        if n == 0 {
+            return;
+        }
+        let angle = self.lp.has_angle();
+        let (row, output) = (self.lp.row, self.lp.output);
+        // Whether a term mixes a loop state with another variable (else no interpolation).
+        let mixed = self.fixed_column.iter().zip(&self.terms).any(|(c, t)| {
+            c.is_none()
+                && t.factors.iter().any(|&(base, _)| match base {
+                    Base::Var(i) | Base::Sin(i) | Base::Cos(i) => i != row && !(angle && i == output),
+                })
+        });
+        let free_terms = self.fixed_column.iter().any(|c| c.is_none());
+        // coef[i n + r]: term i's coefficient in run r.
+        let coef: Vec<f64> = (0..p).flat_map(|i| thetas.iter().map(move |t| t[i])).collect();
+        let mut s = vec![[0.0; 2]; n];
+        let mut at = vec![[0.0; 2]; n];
+        let mut slopes = vec![[[0.0; 2]; 4]; n];
+        let mut acc = vec![0.0; n];
+        let mut vs = vec![[0.0; 16]; n];
         for w in windows {
             let seg = &data.segments[w.seg];
+            let table = &self.fixed[w.seg];
+            let dt = seg.dt;
             let x = &seg.x[w.start];
-            let mut s = [x[self.lp.output], x[self.lp.row]];
+            s.fill([x[output], x[row]]);
             for k in w.start..w.start + h {
-                s = self.step(theta, seg, k, s);
-                let y = if self.lp.has_angle() { s[0] } else { s[1] };
-                out.push(y - seg.x_next[k][self.lp.output]);
+                let v = if mixed {
+                    RK4_POINTS.map(|frac| interpolated(seg, k, frac))
+                } else {
+                    [[0.0; 16]; 3]
+                };
+                for (stage, point) in [0usize, 1, 1, 2].into_iter().enumerate() {
+                    for ((a, s), sl) in at.iter_mut().zip(&s).zip(&slopes) {
+                        *a = match stage {
+                            0 => *s,
+                            1 => [s[0] + 0.5 * dt * sl[0][0], s[1] + 0.5 * dt * sl[0][1]],
+                            2 => [s[0] + 0.5 * dt * sl[1][0], s[1] + 0.5 * dt * sl[1][1]],
+                            _ => [s[0] + dt * sl[2][0], s[1] + dt * sl[2][1]],
+                        };
+                    }
+                    if free_terms {
+                        for (vr, a) in vs.iter_mut().zip(&at) {
+                            *vr = v[point];
+                            if angle {
+                                vr[output] = a[0];
+                            }
+                            vr[row] = a[1];
+                        }
+                    }
+                    let fixed = &table[(3 * k + point) * self.columns..(3 * k + point + 1) * self.columns];
+                    acc.fill(-0.0);
+                    for (i, (term, column)) in self.terms.iter().zip(&self.fixed_column).enumerate() {
+                        let c = &coef[i * n..(i + 1) * n];
+                        match column {
+                            Some(j) => {
+                                let phi = fixed[*j];
+                                for (a, c) in acc.iter_mut().zip(c) {
+                                    *a += c * phi;
+                                }
+                            }
+                            None => {
+                                for ((a, c), vr) in acc.iter_mut().zip(c).zip(&vs) {
+                                    *a += c * eval_term(term, vr);
+                                }
+                            }
+                        }
+                    }
+                    for ((sl, a), rate) in slopes.iter_mut().zip(&at).zip(&acc) {
+                        sl[stage] = if angle { [a[1], *rate] } else { [0.0, *rate] };
+                    }
+                }
+                let y_log = seg.x_next[k][output];
+                for ((s, sl), out) in s.iter_mut().zip(&slopes).zip(outs.iter_mut()) {
+                    let (k1, k2, k3, k4) = (sl[0], sl[1], sl[2], sl[3]);
+                    *s = [
+                        s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+                        s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+                    ];
+                    out.push(if angle { s[0] } else { s[1] } - y_log);
+                }
             }
         }
     }
@@ -255,17 +401,24 @@ impl Row {
         }
         let mut lambda = 1e-3;
         let mut rp = Vec::new();
+        let mut columns = vec![Vec::new(); p];
         for _ in 0..options.max_iter {
             // J = ∂r/∂θ by forward differences.
             let m = r.len();
             let mut jac = DMatrix::zeros(m, p);
-            for i in 0..p {
-                let step = 1e-6 * theta[i].abs().max(1.0);
-                let mut tp = theta.clone();
-                tp[i] += step;
-                self.residuals(&tp, data, windows, h, &mut rp);
+            let steps: Vec<f64> = theta.iter().map(|t| 1e-6 * t.abs().max(1.0)).collect();
+            let perturbed: Vec<Vec<f64>> = (0..p)
+                .map(|i| {
+                    let mut tp = theta.clone();
+                    tp[i] += steps[i];
+                    tp
+                })
+                .collect();
+            let thetas: Vec<&[f64]> = perturbed.iter().map(|t| t.as_slice()).collect();
+            self.residuals_of(&thetas, data, windows, h, &mut columns);
+            for (i, rp) in columns.iter().enumerate() {
                 for (row, (a, b)) in rp.iter().zip(&r).enumerate() {
-                    jac[(row, i)] = (a - b) / step;
+                    jac[(row, i)] = (a - b) / steps[i];
                 }
             }
             if jac.iter().any(|v: &f64| !v.is_finite()) {
@@ -388,11 +541,13 @@ pub fn refine(coefficients: &mut [Coefficient], data: &Dataset, options: &Refine
             out.push(report);
             continue;
         }
-        let row = Row {
+        let row = Row::new(
             lp,
-            theta0: idx.iter().map(|&i| coefficients[i].coefficient).collect(),
             terms,
-        };
+            idx.iter().map(|&i| coefficients[i].coefficient).collect(),
+            data,
+            h,
+        );
         // Cross-validation: refine on all folds but one, score the one (in parallel over folds).
         let scores: Vec<(f64, f64, usize)> = std::thread::scope(|scope| {
             let handles: Vec<_> = (0..folds)
@@ -518,6 +673,92 @@ mod tests {
             c("roll_rate", -2.0 * zeta * wn),
             c("u_roll", gain * wn * wn),
         ]
+    }
+
+    /// The free runs with the fixed terms tabulated per sample, several coefficient vectors side
+    /// by side, are bit for bit the plain evaluation: every term by `sindy::eval_term` on the
+    /// interpolated variables at every RK4 stage (a row with fixed, loop-state-only and mixed
+    /// terms, powers and trigonometric factors).
+    #[test]
+    fn tabulated_runs_are_the_plain_runs_bit_for_bit() {
+        let mut data = roll_data(6.0, 0.5, 0.9, 0.01, 2);
+        for seg in data.segments.iter_mut() {
+            for (k, x) in seg.x.iter_mut().chain(seg.x_next.iter_mut()).enumerate() {
+                x[4] = 0.1 * (k as f64 * 0.05).sin();
+                x[10] = 0.3 * (k as f64 * 0.07).cos();
+            }
+        }
+        let vars: Vec<String> = DEFAULT_STATES
+            .iter()
+            .chain(DEFAULT_INPUTS.iter())
+            .map(|s| s.to_string())
+            .collect();
+        let names = [
+            "roll",
+            "roll_rate",
+            "u_roll",
+            "pitch^2",
+            "roll_rate*pitch_rate",
+            "sin(roll)*cos(pitch)",
+            "u_roll*cos(pitch)",
+            "1",
+        ];
+        let terms: Vec<Term> = names.iter().map(|t| parse_term(t, &vars).unwrap()).collect();
+        let theta0 = vec![-36.0, -8.4, 32.0, 0.5, 0.2, -1.5, 2.0, 0.1];
+        let lp = LOOPS[1];
+        let h = 30;
+        let row = Row::new(lp, terms.clone(), theta0.clone(), &data, h);
+        assert_eq!(row.columns, 4);
+        let windows: Vec<Window> = (0..2)
+            .flat_map(|seg| (0..250).step_by(7).map(move |start| Window { seg, start }))
+            .collect();
+        let plain = |theta: &[f64]| -> Vec<f64> {
+            let mut out = Vec::new();
+            for w in &windows {
+                let seg = &data.segments[w.seg];
+                let mut s = [seg.x[w.start][3], seg.x[w.start][9]];
+                for k in w.start..w.start + h {
+                    let f = |frac: f64, s: [f64; 2]| -> [f64; 2] {
+                        let mut v = [0.0; 16];
+                        for i in 0..12 {
+                            v[i] = seg.x[k][i] + frac * (seg.x_next[k][i] - seg.x[k][i]);
+                        }
+                        v[12..].copy_from_slice(&seg.u[k]);
+                        v[3] = s[0];
+                        v[9] = s[1];
+                        let rate: f64 = terms
+                            .iter()
+                            .zip(theta)
+                            .map(|(t, c)| c * crate::identify::sindy::eval_term(t, &v))
+                            .sum();
+                        [s[1], rate]
+                    };
+                    let dt = seg.dt;
+                    let k1 = f(0.0, s);
+                    let k2 = f(0.5, [s[0] + 0.5 * dt * k1[0], s[1] + 0.5 * dt * k1[1]]);
+                    let k3 = f(0.5, [s[0] + 0.5 * dt * k2[0], s[1] + 0.5 * dt * k2[1]]);
+                    let k4 = f(1.0, [s[0] + dt * k3[0], s[1] + dt * k3[1]]);
+                    s = [
+                        s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+                        s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+                    ];
+                    out.push(s[0] - seg.x_next[k][3]);
+                }
+            }
+            out
+        };
+        let other: Vec<f64> = theta0
+            .iter()
+            .enumerate()
+            .map(|(i, t)| t * (1.0 + 0.01 * i as f64))
+            .collect();
+        let mut outs = vec![Vec::new(); 2];
+        row.residuals_of(&[&theta0, &other], &data, &windows, h, &mut outs);
+        for (theta, got) in [&theta0, &other].into_iter().zip(&outs) {
+            let want = plain(theta);
+            assert_eq!(got.len(), want.len());
+            assert!(got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
     }
 
     #[test]

@@ -248,6 +248,9 @@ pub struct Prepared {
     xty: DMatrix<f64>,
     /// The unbiased refit of target t on a support (the normalised columns' coefficients).
     unbiased: std::collections::HashMap<(usize, Vec<usize>), Vec<f64>>,
+    /// One QR factorisation of the normalised library for every unbiased refit: R (p × p) and the
+    /// first p rows of Qᵀ Ẏ (see [`Prepared::refit`]). Computed when first needed.
+    qr: Option<(DMatrix<f64>, DMatrix<f64>)>,
 }
 
 impl Prepared {
@@ -287,7 +290,35 @@ impl Prepared {
             gram,
             xty,
             unbiased: std::collections::HashMap::new(),
+            qr: None,
         })
+    }
+
+    /// The least-squares refit of target `t` on the normalised columns `support` (coefficients
+    /// in the support's order): what `lstsq(x_S, y_t)` solves. With Θ = Q R (one Householder QR of
+    /// the N × p library per data set, when N ≥ p), ‖Θ_S w − y‖² = ‖R_S w − (Qᵀy)₁..ₚ‖² + a
+    /// constant, so each support is solved on the p × k columns S of R instead of a fresh QR of
+    /// the N × k columns of Θ: the same problem, its rank test and fallback on the same numbers
+    /// (R_S has Θ_S's singular values; the tolerance is taken at N rows as `lstsq`'s), equal up to
+    /// round-off. A sweep refits one support per distinct (target, support) of its thresholds, so
+    /// this replaces tens of N × k factorisations by one.
+    fn refit(&mut self, t: usize, support: &[usize]) -> Vec<f64> {
+        let (n, p) = self.x.shape();
+        if n < p {
+            let xs = self.x.select_columns(support);
+            let ys = DMatrix::from_column_slice(n, 1, self.y.column(t).as_slice());
+            return lstsq(&xs, &ys).column(0).iter().copied().collect();
+        }
+        let (x, y) = (&self.x, &self.y);
+        let (r, qty) = self.qr.get_or_insert_with(|| {
+            let qr = x.clone().qr();
+            let mut qty = y.clone();
+            qr.q_tr_mul(&mut qty);
+            (qr.r(), qty.rows(0, p).into_owned())
+        });
+        let rs = r.select_columns(support);
+        let rhs = DMatrix::from_column_slice(p, 1, qty.column(t).as_slice());
+        lstsq_at(&rs, &rhs, n).column(0).iter().copied().collect()
     }
 
     /// The initial guess lstsq(x, y), features × targets (Householder QR: 2Np² flops).
@@ -351,19 +382,18 @@ impl Prepared {
         if unbias {
             for t in 0..coef.nrows() {
                 let support: Vec<usize> = (0..p).filter(|&j| coef[(t, j)].abs() > 1e-14).collect();
-                let (x, y) = (&self.x, &self.y);
-                let row = self.unbiased.entry((t, support)).or_insert_with_key(|(_, support)| {
+                let key = (t, support);
+                if !self.unbiased.contains_key(&key) {
                     let mut row = vec![0.0; p];
-                    if !support.is_empty() {
-                        let xs = x.select_columns(support);
-                        let ys = DMatrix::from_column_slice(y.nrows(), 1, y.column(t).as_slice());
-                        let w = lstsq(&xs, &ys);
-                        for (k, &j) in support.iter().enumerate() {
-                            row[j] = w[(k, 0)];
+                    if !key.1.is_empty() {
+                        let w = self.refit(t, &key.1);
+                        for (k, &j) in key.1.iter().enumerate() {
+                            row[j] = w[k];
                         }
                     }
-                    row
-                });
+                    self.unbiased.insert(key.clone(), row);
+                }
+                let row = &self.unbiased[&key];
                 for j in 0..p {
                     coef[(t, j)] = row[j];
                 }
@@ -385,8 +415,15 @@ impl Prepared {
 /// Minimum-norm least squares `numpy.linalg.lstsq(a, b, rcond=None)`: features × targets.
 /// Householder QR when `a` has full column rank (the solution is then unique), SVD otherwise.
 pub fn lstsq(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    lstsq_at(a, b, a.nrows())
+}
+
+/// [`lstsq`] with its rank tolerance (rcond = ε · max(rows, p)) taken at `rows` rows: for a
+/// triangular factor R_S of an N-row matrix, `lstsq_at(R_S, Qᵀb, N)` decides rank as `lstsq` on
+/// the N-row matrix does.
+fn lstsq_at(a: &DMatrix<f64>, b: &DMatrix<f64>, rows: usize) -> DMatrix<f64> {
     let (n, p) = a.shape();
-    let rcond = f64::EPSILON * n.max(p) as f64;
+    let rcond = f64::EPSILON * rows.max(n).max(p) as f64;
     if n >= p && p > 0 {
         let qr = a.clone().qr();
         let r = qr.r();
@@ -551,6 +588,47 @@ fn sr3(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The unbiased refits on one QR of the library are `lstsq` on the support's columns up to
+    /// round-off, also where the support is rank deficient (a repeated column: the minimum-norm
+    /// solution by the SVD fallback on both ways).
+    #[test]
+    fn refits_on_one_qr_are_lstsq_on_the_support() {
+        let n = 300;
+        let theta = DMatrix::from_fn(n, 7, |k, j| {
+            let t = k as f64 * 0.03;
+            match j {
+                0 => 1.0,
+                1 => t.sin(),
+                2 => (1.7 * t).cos(),
+                3 => t.sin() * (0.4 * t).cos(),
+                4 => t.sin(),
+                5 => (0.2 * t).sin() + 0.02 * (k % 7) as f64,
+                _ => t.cos().powi(3),
+            }
+        });
+        let y = DMatrix::from_fn(n, 2, |k, c| {
+            let t = k as f64 * 0.03;
+            let noise = 0.01 * (((k * 7919 + c * 31) % 97) as f64 / 97.0 - 0.5);
+            (1.0 + c as f64) * t.sin() - 0.5 * (1.7 * t).cos() + 0.2 * (0.2 * t).sin() + noise
+        });
+        let mut prepared = Prepared::new(&theta, &y, true).unwrap();
+        for support in [vec![1], vec![1, 2], vec![0, 2, 5, 6], vec![1, 3, 4], (0..7).collect()] {
+            for t in 0..2 {
+                let xs = prepared.x.select_columns(&support);
+                let ys = DMatrix::from_column_slice(n, 1, prepared.y.column(t).as_slice());
+                let want = lstsq(&xs, &ys);
+                let got = prepared.refit(t, &support);
+                let scale = want.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
+                for (k, g) in got.iter().enumerate() {
+                    assert!(
+                        (g - want[(k, 0)]).abs() < 1e-9 * scale,
+                        "{support:?} {t}: {got:?} vs {want}"
+                    );
+                }
+            }
+        }
+    }
 
     #[test]
     fn lstsq_matches_normal_equations() {
