@@ -133,13 +133,13 @@ impl Excitation {
     }
 
     /// The horizon check's input bounds: per channel ± [`INPUT_MARGIN_FACTOR`] × the largest logged
-    /// |command| (the commands the data supports, widened by half), at least
-    /// [`ExcitationOptions::bound_share`] of the channel's MPC bound (a channel that never moved
-    /// still gets a sliver of range).
+    /// |command| (the commands the data supports, widened by half), at most the channel's MPC bound
+    /// (the MPC never commands more) and at least [`ExcitationOptions::bound_share`] of it (a
+    /// channel that never moved still gets a sliver of range).
     pub fn check_inputs(&self) -> [f64; 4] {
         let floor = ExcitationOptions::default().bound_share;
         core::array::from_fn(|j| match self.channels.get(j) {
-            Some(c) if c.max_abs.is_finite() => (INPUT_MARGIN_FACTOR * c.max_abs).max(floor * c.bound),
+            Some(c) if c.max_abs.is_finite() => (INPUT_MARGIN_FACTOR * c.max_abs).clamp(floor * c.bound, c.bound),
             Some(c) => c.bound,
             None => Envelope::default().inputs[j],
         })
