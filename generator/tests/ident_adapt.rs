@@ -86,15 +86,30 @@ fn assert_unexcited_said(v: &serde_json::Value, err: &str) {
 
 fn assert_sindy_adapted(v: &serde_json::Value, err: &str) {
     assert_unexcited_said(v, err);
-    let terms: Vec<&str> = v["coefficients"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| c["term"].as_str().unwrap())
-        .collect();
+    // Heading terms only in the vx and vy rows, fitted in the heading frame (rotated by the
+    // heading as structure, docs/identification.md "Heading frame"); none of the silent input.
+    let coefs = v["coefficients"].as_array().unwrap();
+    for c in coefs {
+        let (state, term) = (c["state"].as_str().unwrap(), c["term"].as_str().unwrap());
+        assert!(!term.contains("u_yaw_rate"), "{state}: {term}");
+        assert!(
+            !term.contains("yaw)") || state == "vx" || state == "vy",
+            "{state}: {term}"
+        );
+    }
+    assert_eq!(
+        v["provenance"]["heading_frame"]["rows"],
+        serde_json::json!(["vx", "vy"]),
+        "{}",
+        v["provenance"]
+    );
+    // The thrust direction rotates with the heading: the vx row holds a tilt term times cos or
+    // sin of the heading.
     assert!(
-        terms.iter().all(|t| !t.contains("yaw)") && !t.contains("u_yaw_rate")),
-        "{terms:?}"
+        coefs.iter().any(|c| c["state"] == "vx"
+            && c["term"].as_str().unwrap().contains("yaw)")
+            && (c["term"].as_str().unwrap().contains("pitch") || c["term"].as_str().unwrap().contains("roll"))),
+        "{coefs:?}"
     );
     let excluded = v["provenance"]["excluded_unexcited_terms"].as_array().unwrap();
     assert!(excluded.iter().any(|t| t == "u_roll*cos(yaw)"), "{excluded:?}");
@@ -116,8 +131,13 @@ fn assert_pd_adapted(v: &serde_json::Value, err: &str) {
         .map(|x| x.as_f64().unwrap())
         .collect();
     assert!(xi[3] == xi[9], "{xi:?}");
-    // Where the yaw damping itself came out 0 (nothing to fit it on), the yaw channel is dead in
-    // the model: said, not hidden.
+    // The yaw damping has nothing to be fitted on (the yaw rate is gyro noise): it is held at its
+    // physical bound Iz / τ (1 s; docs/pd-fit.md), not fitted to 0, so the yaw channel is alive.
+    assert!(
+        xi[9] >= xi[15] / uavgen::identify::pd::MAX_RATE_TIME_CONSTANT - 1e-9,
+        "{xi:?}"
+    );
+    // Were the yaw damping 0, the yaw channel would be dead in the model: said, not hidden.
     if xi[9] == 0.0 {
         assert!(
             err.contains("warning: u_yaw_rate: the model does not act on it"),

@@ -44,6 +44,9 @@ const STATE_NAMES: [&str; 12] = crate::model::DEFAULT_STATES;
 pub const ZERO_GAIN: f64 = 0.05;
 /// The margin added on each side of the logged heading arc for the horizon check's start yaw.
 pub const YAW_MARGIN: f64 = 0.1;
+/// The horizon check flies each input within ± this factor times its largest logged |command|
+/// ([`Excitation::check_inputs`]).
+pub const INPUT_MARGIN_FACTOR: f64 = 1.5;
 
 /// Thresholds of the detector (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
@@ -81,6 +84,8 @@ pub struct ChannelExcitation {
     pub commanded_sd: f64,
     pub bound: f64,
     pub silent: bool,
+    /// The largest |command| logged.
+    pub max_abs: f64,
 }
 
 /// What the logs excite.
@@ -127,6 +132,19 @@ impl Excitation {
         (half < PI).then_some((self.heading_centre - half, self.heading_centre + half))
     }
 
+    /// The horizon check's input bounds: per channel ± [`INPUT_MARGIN_FACTOR`] × the largest logged
+    /// |command| (the commands the data supports, widened by half), at most the channel's MPC bound
+    /// (the MPC never commands more) and at least [`ExcitationOptions::bound_share`] of it (a
+    /// channel that never moved still gets a sliver of range).
+    pub fn check_inputs(&self) -> [f64; 4] {
+        let floor = ExcitationOptions::default().bound_share;
+        core::array::from_fn(|j| match self.channels.get(j) {
+            Some(c) if c.max_abs.is_finite() => (INPUT_MARGIN_FACTOR * c.max_abs).clamp(floor * c.bound, c.bound),
+            Some(c) => c.bound,
+            None => Envelope::default().inputs[j],
+        })
+    }
+
     /// The warnings to print (empty when everything is excited).
     pub fn warnings(&self) -> Vec<String> {
         let mut w = Vec::new();
@@ -161,6 +179,7 @@ impl Excitation {
                         "commanded_sd": c.commanded_sd,
                         "bound": c.bound,
                         "silent": c.silent,
+                        "max_abs": c.max_abs,
                     }),
                 )
             })
@@ -173,6 +192,7 @@ impl Excitation {
                 "threshold": options.heading_arc,
             },
             "channels": channels,
+            "horizon_check_inputs": self.check_inputs(),
             "rule": format!(
                 "heading still: every yaw within an arc < {} rad; a channel is silent when σ_u < {} σ of the quantity it commands or < {} of its bound",
                 options.heading_arc, options.state_share, options.bound_share
@@ -252,6 +272,12 @@ pub fn analyse(logs: &[FlightLog], options: &ExcitationOptions) -> Excitation {
                 commanded_sd,
                 bound,
                 silent: sd < options.state_share * commanded_sd || sd < options.bound_share * bound,
+                max_abs: logs
+                    .iter()
+                    .flat_map(|l| &l.segments)
+                    .flat_map(|s| s.u.iter().map(move |u| u[j].abs()))
+                    .filter(|v| v.is_finite())
+                    .fold(0.0, f64::max),
             }
         })
         .collect();
@@ -381,6 +407,18 @@ mod tests {
         let j = e.to_json(&ExcitationOptions::default());
         assert_eq!(j["channels"]["u_yaw_rate"]["silent"], true);
         assert_eq!(j["heading"]["still"], true);
+        // The horizon check's inputs: 1.5 × the largest |command| (0.5, 0.2, 0.2 up to the sine's
+        // largest sample), the silent u_yaw_rate (±0.001) at its floor, 1 % of its MPC bound.
+        let b = e.check_inputs();
+        let bound = ExcitationOptions::default().bounds[3];
+        assert!(
+            (b[0] - 0.75).abs() < 1e-3 && (b[1] - 0.3).abs() < 1e-3 && (b[2] - 0.3).abs() < 1e-3,
+            "{b:?}"
+        );
+        assert_eq!(b[3], 0.01 * bound);
+        let check = crate::identify::horizon_check::HorizonCheck::for_excitation(&e);
+        assert_eq!(check.inputs, b);
+        assert_eq!(check.yaw, e.yaw_range());
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //! predictions, and the QP built on them, meaningless. `uavgen identify` runs this check on every
 //! model it writes (docs/identification.md).
 
+use super::excitation::Excitation;
 use crate::discretize::{auto_substeps, discrete_step, Envelope};
 use crate::ir::ModelIr;
 use crate::model::Model;
@@ -58,6 +59,20 @@ impl Default for HorizonCheck {
             max_tilt: 1.5,
             max_rate: 15.0,
             seed: 0,
+        }
+    }
+}
+
+impl HorizonCheck {
+    /// The check of a model identified on logs analysed as `ex` (docs/identification.md,
+    /// "Unexcited directions"): the defaults, with the inputs within the logged range widened
+    /// ([`Excitation::check_inputs`]: ± 1.5 × the largest logged |command|) instead of the MPC's
+    /// bounds, and the start yaw within the logged arc when the heading did not move.
+    pub fn for_excitation(ex: &Excitation) -> Self {
+        HorizonCheck {
+            yaw: ex.heading_still.then(|| ex.yaw_range()).flatten(),
+            inputs: ex.check_inputs(),
+            ..HorizonCheck::default()
         }
     }
 }

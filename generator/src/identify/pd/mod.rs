@@ -81,7 +81,19 @@ pub struct PdFitOptions {
     /// stiffness or damping (ξ7, ξ5, ξ6, ξ10): the commanded quantity follows the command once
     /// settled.
     pub unit_gain: [bool; 4],
+    /// The slowest rate loop a multirotor is taken to have (s): with known inertias
+    /// ([`PdScale::Inertia`]) each rate damping is bounded below, ξ8 ≥ Ix/τ, ξ9 ≥ Iy/τ,
+    /// ξ10 ≥ Iz/τ (the rate settles within τ without a command). A loop the logs do not excite
+    /// (a still heading: the yaw rate is gyro noise) otherwise fits a damping of 0 and the model's
+    /// channel is dead: its rate never decays and, at the unit static gain, the command never acts.
+    /// `None`: dampings ≥ 0 only.
+    pub max_rate_time_constant: Option<f64>,
 }
+
+/// The default [`PdFitOptions::max_rate_time_constant`] (s): every stabilised multirotor's rate
+/// loops settle well within it (the bed's plants: yaw 0.05–0.2 s, roll and pitch < 0.1 s; the M100
+/// logs' PD fit: yaw 0.4 s).
+pub const MAX_RATE_TIME_CONSTANT: f64 = 1.0;
 
 /// Per channel: the gain ξ and the stiffness/damping ξ that sets its static gain (1-based).
 pub const CHANNEL_GAIN_XI: [(usize, usize); 4] = [(1, 7), (2, 5), (3, 6), (4, 10)];
@@ -100,6 +112,7 @@ impl Default for PdFitOptions {
             xi11_margin: 0.05,
             free_run: true,
             unit_gain: [false; 4],
+            max_rate_time_constant: Some(MAX_RATE_TIME_CONSTANT),
         }
     }
 }
@@ -313,6 +326,11 @@ fn validate(o: &PdFitOptions) -> Result<(), PdFitError> {
             "min_inertia must be finite and positive, got {}",
             o.min_inertia
         ));
+    }
+    if let Some(tau) = o.max_rate_time_constant {
+        if !(tau.is_finite() && tau > 0.0) {
+            return bad(format!("max_rate_time_constant must be finite and positive, got {tau}"));
+        }
     }
     if !(o.xi11_margin > 0.0 && o.xi11_margin < 1.0) {
         return bad(format!("xi11_margin must be in (0, 1), got {}", o.xi11_margin));
@@ -563,10 +581,15 @@ pub fn fit(
     }
     let xi11_max = (1.0 - options.xi11_margin) * m;
     let inf = f64::INFINITY;
+    // A rate damping is at least I/τ with known inertias (PdFitOptions::max_rate_time_constant).
+    let min_damping = |k: usize| match (&options.scale, options.max_rate_time_constant) {
+        (PdScale::Inertia(i), Some(tau)) if (8..=10).contains(&k) => i[k - 8] / tau,
+        _ => 0.0,
+    };
     let bounds = |k: usize| match k {
         11 => (-xi11_max, xi11_max),
         14..=16 => (options.min_inertia, inf),
-        _ => (0.0, inf),
+        _ => (min_damping(k), inf),
     };
     let reweight = options.weighting == PdWeighting::Acceleration;
     let translation_group = Group {

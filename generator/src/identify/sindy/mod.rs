@@ -2,8 +2,11 @@
 //! definitions), optionally with a sparsity sweep selected by AIC. The result is a `uavgen-model/1`
 //! [`SindyFile`] with provenance. See `docs/sindy.md`.
 
+pub mod heading_frame;
 pub mod library;
 pub mod optimizer;
+
+pub use heading_frame::HeadingFrame;
 
 pub use library::{eval_term, paper_library, physics_library, Library, LibraryKind, PHYSICS_STATES};
 pub use optimizer::{lstsq, regress, Optimizer, OptimizerError, Regression, Regularizer};
@@ -83,6 +86,23 @@ pub struct SindyOptions {
     /// ([`crate::identify::excitation`]): every library term that uses one is left out of the
     /// regression (coefficient 0) and listed in the provenance (`excluded_unexcited_terms`).
     pub excluded_vars: Vec<usize>,
+    /// When the vx and vy rows are fitted in the heading frame and written back rotated
+    /// ([`heading_frame`]; physics library and dynamic rows only). Default: [`HeadingFrame::Auto`],
+    /// when the heading is among `excluded_vars`.
+    pub heading_frame: HeadingFrame,
+}
+
+impl SindyOptions {
+    /// Are the vx and vy rows fitted in the heading frame ([`heading_frame`])?
+    pub fn heading_frame_active(&self) -> bool {
+        self.rows == FittedRows::Dynamic
+            && self.library == LibraryKind::Physics
+            && match self.heading_frame {
+                HeadingFrame::Auto => self.excluded_vars.contains(&heading_frame::YAW),
+                HeadingFrame::Always => true,
+                HeadingFrame::Never => false,
+            }
+    }
 }
 
 /// The N of AIC = N ln(RSS/N) + 2k and BIC = N ln(RSS/N) + k ln N.
@@ -119,6 +139,7 @@ impl Default for SindyOptions {
             rows: FittedRows::Dynamic,
             sample_count: SampleCount::Effective,
             excluded_vars: Vec::new(),
+            heading_frame: HeadingFrame::Auto,
         }
     }
 }
@@ -195,14 +216,31 @@ pub struct SindyFit {
     pub sweep_coefficients: Vec<DMatrix<f64>>,
     /// The sweep value (index into `sweep`) each target's row is taken from.
     pub chosen: Vec<usize>,
+    /// The vx and vy rows (indices into `targets`) when they were fitted jointly in the heading
+    /// frame: they always take the same sweep value ([`SindyFit::choose`]).
+    pub heading_pair: Option<[usize; 2]>,
+    /// `provenance.heading_frame` when the pair was fitted in the heading frame.
+    heading_note: Option<Value>,
     options: SindyOptions,
     user_provenance: Value,
 }
 
 impl SindyFit {
     /// Take each target's row from sweep value `chosen[t]`: rebuilds `coefficients`, `rows` and `file`.
+    /// The heading-frame pair ([`SindyFit::heading_pair`]) moves together: both rows take the
+    /// sparser (larger) of their two sweep values.
     pub fn choose(&mut self, chosen: &[usize]) {
         assert_eq!(chosen.len(), self.targets.len(), "one sweep index per target");
+        let mut chosen = chosen.to_vec();
+        if let Some([a, b]) = self.heading_pair {
+            let j = if self.sweep[chosen[b]].value > self.sweep[chosen[a]].value {
+                chosen[b]
+            } else {
+                chosen[a]
+            };
+            chosen[a] = j;
+            chosen[b] = j;
+        }
         let (nt, nl) = (self.targets.len(), self.file.library.len());
         let mut coefficients = DMatrix::zeros(nt, nl);
         let mut rows = Vec::with_capacity(nt);
@@ -232,10 +270,13 @@ impl SindyFit {
             &self.sweep,
             (&self.dropped_terms, &self.excluded_terms),
         );
+        if let (Some(note), Value::Object(p)) = (&self.heading_note, &mut self.file.provenance) {
+            p.insert("heading_frame".into(), note.clone());
+        }
         self.file.coefficients = entries;
         self.coefficients = coefficients;
         self.rows = rows;
-        self.chosen = chosen.to_vec();
+        self.chosen = chosen;
     }
 
     /// The model file as pretty-printed JSON with a trailing newline.
@@ -299,18 +340,20 @@ pub fn fit_with_progress(
         }
     }
     let mut theta_full = library.matrix(values.iter().map(|v| v.as_slice()));
+    let mut ends: Option<Vec<Vec<f64>>> = None;
     if dataset.is_interval_form() {
         // The integral form: ½[Θ(x_k, ū_k) + Θ(x_{k+1}, ū_k)] (dataset::Targets::Trapezoid).
-        let ends: Vec<Vec<f64>> = dataset
+        let e: Vec<Vec<f64>> = dataset
             .interval_ends()
             .zip(&values)
             .map(|(x1, v)| x1.iter().chain(&v[12..]).copied().collect())
             .collect();
-        if let Some(k) = ends.iter().position(|v| v.iter().any(|a| !a.is_finite())) {
+        if let Some(k) = e.iter().position(|v| v.iter().any(|a| !a.is_finite())) {
             return Err(SindyError::NonFinite(k));
         }
-        let theta_end = library.matrix(ends.iter().map(|v| v.as_slice()));
+        let theta_end = library.matrix(e.iter().map(|v| v.as_slice()));
         theta_full = (theta_full + theta_end) * 0.5;
+        ends = Some(e);
     }
     // Terms of a variable the logs did not excite are left out (docs/sindy.md, "Unexcited
     // directions").
@@ -341,7 +384,78 @@ pub fn fit_with_progress(
             terms: kept.len(),
         });
     }
+    // The heading-frame pair (module heading_frame): vx and vy fitted jointly, the other rows as
+    // before.
+    let pair = options
+        .heading_frame_active()
+        .then(|| heading_frame::PairDesign::new(&options.excluded_vars, &vars));
+    let pair_rows: Option<[usize; 2]> = pair.as_ref().map(|_| {
+        let at = |s: &str| {
+            targets
+                .iter()
+                .position(|t| t == s)
+                .expect("dynamic rows hold vx and vy")
+        };
+        [at("vx"), at("vy")]
+    });
+    let main_t: Vec<usize> = (0..targets.len())
+        .filter(|t| pair_rows.map_or(true, |p| !p.contains(t)))
+        .collect();
+    let main_targets: Vec<String> = main_t.iter().map(|&t| targets[t].clone()).collect();
+    let y_main = y.select_columns(&main_t);
     let theta = theta_full.select_columns(&kept);
+    // The world library: the library's terms, then the pair's world terms it does not hold.
+    let mut lib_names = library.names.clone();
+    let mut world_col = Vec::new();
+    let mut pair_fit = None;
+    if let (Some(d), Some([px, py])) = (&pair, pair_rows) {
+        for t in &d.world_terms {
+            let col = match library.terms.iter().position(|l| l == t) {
+                Some(c) => c,
+                None => match lib_names[library.len()..].iter().position(|nm| *nm == t.display(&vars)) {
+                    Some(c) => library.len() + c,
+                    None => {
+                        lib_names.push(t.display(&vars));
+                        lib_names.len() - 1
+                    }
+                },
+            };
+            world_col.push(col);
+        }
+        let row_of = |v: &[f64]| d.rows(v);
+        let mut design = DMatrix::zeros(2 * n, d.columns());
+        for (k, v) in values.iter().enumerate() {
+            let (top, bottom) = row_of(v);
+            for j in 0..d.columns() {
+                design[(k, j)] = top[j];
+                design[(n + k, j)] = bottom[j];
+            }
+        }
+        if let Some(ends) = &ends {
+            for (k, v) in ends.iter().enumerate() {
+                let (top, bottom) = row_of(v);
+                for j in 0..d.columns() {
+                    design[(k, j)] = 0.5 * (design[(k, j)] + top[j]);
+                    design[(n + k, j)] = 0.5 * (design[(n + k, j)] + bottom[j]);
+                }
+            }
+        }
+        let pkept: Vec<usize> = (0..d.columns())
+            .filter(|&j| design.column(j).iter().any(|&v| v != 0.0))
+            .collect();
+        if 2 * n < pkept.len() {
+            return Err(SindyError::TooFewSamples {
+                samples: n,
+                terms: pkept.len() / 2,
+            });
+        }
+        let mut yp = DMatrix::zeros(2 * n, 1);
+        for k in 0..n {
+            yp[(k, 0)] = y[(k, px)];
+            yp[(n + k, 0)] = y[(k, py)];
+        }
+        pair_fit = Some((design.select_columns(&pkept), yp, pkept));
+    }
 
     let values_to_try: Vec<f64> = match &options.sweep {
         None => vec![options.optimizer.sparsity()],
@@ -355,54 +469,143 @@ pub fn fit_with_progress(
     };
     // The normalised library, the initial guess and the normal equations are the same for every
     // sweep value: computed once (optimizer::Prepared; the same numbers as regress per value).
-    let mut prepared = optimizer::Prepared::new(&theta, &y, options.normalize_columns)?;
+    let mut prepared = optimizer::Prepared::new(&theta, &y_main, options.normalize_columns)?;
+    let mut prepared_pair = match &pair_fit {
+        Some((x, yp, _)) => Some(optimizer::Prepared::new(x, yp, options.normalize_columns)?),
+        None => None,
+    };
     let mut regressions = Vec::with_capacity(values_to_try.len());
+    let mut pair_regressions = Vec::with_capacity(values_to_try.len());
     for &value in &values_to_try {
         let opt = options.optimizer.with_sparsity(value);
         regressions.push(prepared.regress(&opt)?);
+        if let Some(pp) = prepared_pair.as_mut() {
+            pair_regressions.push(pp.regress(&opt)?);
+        }
         progress(regressions.len(), values_to_try.len());
     }
+    drop(prepared_pair);
     // N of the criteria, per row, from the densest fit (most non-zero coefficients).
-    let densest = (0..regressions.len())
-        .max_by_key(|&j| {
-            (
-                regressions[j].coef.iter().filter(|&&c| c != 0.0).count(),
-                usize::MAX - j,
-            )
-        })
-        .unwrap_or(0);
-    let n_ic: Vec<f64> = match options.sample_count {
-        SampleCount::Raw => vec![n as f64; targets.len()],
-        SampleCount::Effective => effective_samples(&theta, &y, &regressions[densest].coef),
+    let densest_of = |regs: &[optimizer::Regression]| {
+        (0..regs.len())
+            .max_by_key(|&j| (regs[j].coef.iter().filter(|&&c| c != 0.0).count(), usize::MAX - j))
+            .unwrap_or(0)
+    };
+    let n_ic_main: Vec<f64> = match options.sample_count {
+        SampleCount::Raw => vec![n as f64; main_t.len()],
+        SampleCount::Effective => effective_samples(&theta, &y_main, &regressions[densest_of(&regressions)].coef),
+    };
+    let n_ic_pair: [f64; 2] = match (&pair_fit, options.sample_count) {
+        (Some((x, yp, _)), SampleCount::Effective) => {
+            let r = yp - x * pair_regressions[densest_of(&pair_regressions)].coef.transpose();
+            let r: Vec<f64> = r.iter().copied().collect();
+            [effective_count(&r[..n]), effective_count(&r[n..])]
+        }
+        _ => [n as f64; 2],
     };
     let mut sweep = Vec::with_capacity(values_to_try.len());
-    let mut coefs = Vec::with_capacity(values_to_try.len());
+    let mut sweep_coefficients = Vec::with_capacity(values_to_try.len());
+    let mut pair_regs = pair_regressions.into_iter();
     for (&value, reg) in values_to_try.iter().zip(regressions) {
-        let rows = score(&theta, &y, &reg.coef, &targets, value, &n_ic);
+        let main_rows = score(&theta, &y_main, &reg.coef, &main_targets, value, &n_ic_main);
+        let mut full = DMatrix::zeros(targets.len(), lib_names.len());
+        for (k, &col) in kept.iter().enumerate() {
+            for (i, &t) in main_t.iter().enumerate() {
+                full[(t, col)] = reg.coef[(i, k)];
+            }
+        }
+        let mut rows: Vec<Option<RowFit>> = vec![None; targets.len()];
+        for (i, r) in main_t.iter().zip(main_rows) {
+            rows[*i] = Some(r);
+        }
+        let (mut iterations, mut converged) = (reg.iterations, reg.converged);
+        if let (Some(d), Some((x, yp, pkept)), Some(pr), Some(pt)) = (&pair, &pair_fit, pair_regs.next(), pair_rows) {
+            iterations = iterations.max(pr.iterations);
+            converged &= pr.converged;
+            let mut xi = vec![0.0; d.columns()];
+            for (k, &j) in pkept.iter().enumerate() {
+                xi[j] = pr.coef[(0, k)];
+            }
+            let world = d.world_rows(&xi);
+            for (r, &t) in pt.iter().enumerate() {
+                for (i, &c) in world[r].iter().enumerate() {
+                    full[(t, world_col[i])] += c;
+                }
+            }
+            let k_joint = pr.coef.iter().filter(|&&c| c != 0.0).count();
+            let pred = x * pr.coef.transpose();
+            for (r, &t) in pt.iter().enumerate() {
+                let span = r * n..(r + 1) * n;
+                let obs: Vec<f64> = span.clone().map(|k| yp[(k, 0)]).collect();
+                let rss: f64 = span.clone().map(|k| (yp[(k, 0)] - pred[(k, 0)]).powi(2)).sum();
+                let mean = obs.iter().sum::<f64>() / n as f64;
+                let tss: f64 = obs.iter().map(|a| (a - mean).powi(2)).sum();
+                let ms = obs.iter().map(|a| a * a).sum::<f64>() / n as f64;
+                let base = aic(rss, n, n_ic_pair[r], 0, ms);
+                rows[t] = Some(RowFit {
+                    state: targets[t].clone(),
+                    terms: full.row(t).iter().filter(|&&c| c != 0.0).count(),
+                    rss,
+                    rmse: (rss / n as f64).sqrt(),
+                    r2: if tss > 0.0 { 1.0 - rss / tss } else { f64::NAN },
+                    // The pair's joint coefficients, half to each row.
+                    aic: base + k_joint as f64,
+                    bic: base + 0.5 * k_joint as f64 * n_ic_pair[r].ln(),
+                    sparsity: value,
+                    n_ic: n_ic_pair[r],
+                });
+            }
+        }
+        let rows: Vec<RowFit> = rows.into_iter().map(|r| r.expect("every row scored")).collect();
         let total_aic = rows.iter().map(|r| r.aic).sum();
         let total_bic = rows.iter().map(|r| r.bic).sum();
         sweep.push(SweepPoint {
             value,
-            iterations: reg.iterations,
-            converged: reg.converged,
+            iterations,
+            converged,
             rows,
             total_aic,
             total_bic,
         });
-        coefs.push(reg.coef);
+        sweep_coefficients.push(full);
     }
-    let chosen = select(&sweep, options.selection, options.criterion, targets.len());
-    // Every sweep value's Ξ over the full library.
-    let sweep_coefficients = coefs
-        .iter()
-        .map(|c| {
-            let mut full = DMatrix::zeros(targets.len(), library.len());
-            for (k, &col) in kept.iter().enumerate() {
-                full.set_column(col, &c.column(k));
+    let mut chosen = select(&sweep, options.selection, options.criterion, targets.len());
+    if let Some([a, b]) = pair_rows {
+        // The pair takes one sweep value: the least summed criterion (ties: fewer terms, earlier).
+        let ic = |r: &RowFit| match options.criterion {
+            Criterion::Aic => r.aic,
+            Criterion::Bic => r.bic,
+        };
+        let key = |j: usize| {
+            let p = &sweep[j];
+            (ic(&p.rows[a]) + ic(&p.rows[b]), p.rows[a].terms + p.rows[b].terms)
+        };
+        let mut best = chosen[a];
+        if options.selection == AicSelection::PerRow {
+            best = 0;
+            for j in 1..sweep.len() {
+                let (x, y) = (key(j), key(best));
+                if x.0 < y.0 || (x.0 == y.0 && x.1 < y.1) {
+                    best = j;
+                }
             }
-            full
+        }
+        chosen[a] = best;
+        chosen[b] = best;
+    }
+    let heading_note = pair.as_ref().map(|d| {
+        json!({
+            "rows": ["vx", "vy"],
+            "mode": options.heading_frame.name(),
+            "why": match options.heading_frame {
+                HeadingFrame::Always => "always (--heading-frame always)",
+                _ => "the heading was not excited: its terms cannot be identified in the world frame",
+            },
+            "form": "vx' = cos(yaw) F - sin(yaw) L, vy' = sin(yaw) F + cos(yaw) L; F, L over the heading-frame library with vx, vy standing for the heading-frame velocities cos(yaw) vx + sin(yaw) vy, -sin(yaw) vx + cos(yaw) vy; fitted jointly, written back expanded in world terms",
+            "heading_frame_library": d.library.names,
+            "world_terms_added": lib_names[library.len()..],
         })
-        .collect();
+    });
     let mut fit = SindyFit {
         file: SindyFile {
             format: FORMAT.to_string(),
@@ -411,7 +614,7 @@ pub fn fit_with_progress(
             states: None,
             inputs: None,
             provenance: Value::Null,
-            library: library.names.clone(),
+            library: lib_names,
             kinematic: match options.rows {
                 FittedRows::Dynamic => KINEMATIC.iter().map(|(a, b)| (a.to_string(), b.to_string())).collect(),
                 FittedRows::All => Vec::new(),
@@ -427,6 +630,8 @@ pub fn fit_with_progress(
         excluded_terms,
         sweep_coefficients,
         chosen: Vec::new(),
+        heading_pair: pair_rows,
+        heading_note,
         options: options.clone(),
         user_provenance: provenance,
     };
@@ -436,26 +641,31 @@ pub fn fit_with_progress(
 
 /// N_eff = N / τ per row, τ = 1 + 2 Σ_{k≥1} ρ_k the integrated autocorrelation time of the residual of
 /// `coef` (ρ_k its lag-k autocorrelation, summed while positive, up to [`MAX_LAG`]).
+/// N / τ of one residual series (see [`effective_samples`]).
+pub fn effective_count(r: &[f64]) -> f64 {
+    let n = r.len();
+    if n == 0 {
+        return 1.0;
+    }
+    let mean = r.iter().sum::<f64>() / n as f64;
+    let var: f64 = r.iter().map(|a| (a - mean).powi(2)).sum();
+    let mut tau = 1.0;
+    if var > 0.0 {
+        for lag in 1..MAX_LAG.min(n) {
+            let rho = (lag..n).map(|k| (r[k] - mean) * (r[k - lag] - mean)).sum::<f64>() / var;
+            if rho <= 0.0 {
+                break;
+            }
+            tau += 2.0 * rho;
+        }
+    }
+    (n as f64 / tau).max(1.0)
+}
+
 pub fn effective_samples(theta: &DMatrix<f64>, y: &DMatrix<f64>, coef: &DMatrix<f64>) -> Vec<f64> {
-    let n = theta.nrows();
     let residual = y - theta * coef.transpose();
     (0..y.ncols())
-        .map(|t| {
-            let r = residual.column(t);
-            let mean = r.mean();
-            let var: f64 = r.iter().map(|a| (a - mean).powi(2)).sum();
-            let mut tau = 1.0;
-            if var > 0.0 {
-                for lag in 1..MAX_LAG.min(n) {
-                    let rho = (lag..n).map(|k| (r[k] - mean) * (r[k - lag] - mean)).sum::<f64>() / var;
-                    if rho <= 0.0 {
-                        break;
-                    }
-                    tau += 2.0 * rho;
-                }
-            }
-            (n as f64 / tau).max(1.0)
-        })
+        .map(|t| effective_count(&residual.column(t).iter().copied().collect::<Vec<_>>()))
         .collect()
 }
 
