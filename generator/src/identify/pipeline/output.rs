@@ -7,13 +7,11 @@ use crate::identify::horizon_check::{self, HorizonCheck};
 use crate::identify::response::InputResponse;
 use crate::model::envelope;
 
-/// The horizon check of `identify`: the defaults, with the start yaw within the logged arc when
-/// the heading did not move (docs/identification.md, "Unexcited directions").
+/// The horizon check of `identify`: the start yaw within the logged arc when the heading did not
+/// move, the inputs within the logged range (widened, capped at the MPC bounds)
+/// (docs/identification.md, "Unexcited directions").
 pub(super) fn horizon_check_options(ex: &Excitation) -> HorizonCheck {
-    HorizonCheck {
-        yaw: ex.heading_still.then(|| ex.yaw_range()).flatten(),
-        ..HorizonCheck::default()
-    }
+    HorizonCheck::for_excitation(ex)
 }
 
 /// The model text with the input response as `corrections` (latency, actuator_lag).
