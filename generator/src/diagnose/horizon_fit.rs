@@ -15,7 +15,7 @@
 //!
 //! ```text
 //! R(d) = mean_q MSE_q(d) / MSE_q(d₀)      12 states, free runs of N samples from every
-//!                                         STRIDE-th training sample (runs that diverge: R = ∞)
+//!                                         STRIDE s of training data (runs that diverge: R = ∞)
 //! d_j  ← argmin R over [min(d₀,j, s_j), max(d₀,j, s_j)]: half-sample steps from d₀,j and the
 //!        bracket's ends, then ± ¼ sample around the best
 //! ```
@@ -31,8 +31,9 @@ use super::catalogue::loops::LoopParams;
 use super::horizon_rule::add_errors;
 use super::problem::{HorizonErrors, Problem, State};
 
-/// Training free runs start at every STRIDE-th sample (a search: sparser than the horizon rule's).
-const STRIDE: usize = 6;
+/// Training free runs start every STRIDE seconds (a search: sparser than the horizon rule's; every
+/// 6th sample at 30 Hz, every 20th at 100 Hz).
+const STRIDE: f64 = 0.2;
 
 /// R of `e` against `reference` (module docs); ∞ when `e` diverges more often or has no samples.
 fn objective(reference: &HorizonErrors, e: &HorizonErrors) -> f64 {

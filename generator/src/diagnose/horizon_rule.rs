@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! R = mean_i  MSE_i,after / MSE_i,before      over the 12 states (yaw wrapped), free runs of N
-//!                                             samples from every STRIDE-th held-out sample
+//!                                             samples from a held-out sample every STRIDE s
 //! ```
 //!
 //! R > 1 (or more diverged runs after than before) fails the rule. For `latency` and
@@ -18,8 +18,18 @@ use super::problem::{HorizonErrors, Problem, State};
 use super::shrink::{run, wrapped};
 use crate::logs::{on_ground, run_touches_ground};
 
-/// A run starts at every STRIDE-th held-out sample.
-pub(crate) const STRIDE: usize = 3;
+/// A run starts every STRIDE seconds of held-out data (every 3rd sample at 30 Hz, every 10th at
+/// 100 Hz: the runs overlap by most of the horizon either way).
+pub(crate) const STRIDE: f64 = 0.1;
+
+/// Every how many samples of period `dt` a run starts, for a stride of `seconds` (at least 1).
+pub(crate) fn stride_samples(seconds: f64, dt: f64) -> usize {
+    if dt > 0.0 && (seconds / dt).is_finite() {
+        ((seconds / dt).round() as usize).max(1)
+    } else {
+        1
+    }
+}
 
 /// The horizon errors of the model `state` describes, on the held-out data of every test fit.
 pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {
@@ -31,8 +41,9 @@ pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {
 }
 
 /// Add to `out` the free runs of N samples of fit `i`'s model (`state` with that fit's parameters)
-/// from every `stride`-th sample of the segments `segs` (runs that touch the ground left out).
-pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], stride: usize, out: &mut HorizonErrors) {
+/// from a sample every `stride` seconds ([`stride_samples`]) of the segments `segs` (runs that
+/// touch the ground left out).
+pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], stride: f64, out: &mut HorizonErrors) {
     let horizon = p.options.horizon;
     let data = p.data.variant(state.destale);
     let aug = p.augmented(state, i);
@@ -40,7 +51,7 @@ pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], s
         let seg = &data[s];
         let seen = aug.seen_inputs(seg);
         let ground = on_ground(&seg.x);
-        for k in (0..seg.len().saturating_sub(horizon)).step_by(stride.max(1)) {
+        for k in (0..seg.len().saturating_sub(horizon)).step_by(stride_samples(stride, seg.dt)) {
             if run_touches_ground(&ground, k, horizon) {
                 continue;
             }

@@ -103,6 +103,7 @@ fn scan(p: &Problem, state: &State, j: usize, aff: &[usize], tau_c: &[f64; 6], s
     let dt = p.dt();
     // At least 0.4 s (a real autopilot's command delay reaches 0.2 s, plus its lag).
     let max_d = p.options.max_delay_samples.max((MIN_SCAN_DELAY / dt).ceil());
+    let _scope = p.scope(state, Some(j), false);
     let mut points: Vec<(f64, f64, Sums)> = Vec::new();
     let add = |points: &mut Vec<(f64, f64, Sums)>, d: f64, tau: f64| {
         if d < -1e-12 || d > max_d * dt + 1e-9 {
