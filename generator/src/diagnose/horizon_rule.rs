@@ -77,6 +77,17 @@ mod tests {
     use super::*;
 
     #[test]
+    fn strides_are_in_seconds() {
+        assert_eq!(stride_samples(STRIDE, 1.0 / 30.0), 3);
+        assert_eq!(stride_samples(STRIDE, 0.0334), 3);
+        assert_eq!(stride_samples(STRIDE, 0.01), 10);
+        assert_eq!(stride_samples(STRIDE, 0.02), 5);
+        assert_eq!(stride_samples(0.2, 1.0 / 30.0), 6);
+        assert_eq!(stride_samples(STRIDE, 1.0), 1);
+        assert_eq!(stride_samples(STRIDE, 0.0), 1);
+    }
+
+    #[test]
     fn the_ratio_is_the_mean_per_state_mse_ratio() {
         let before = HorizonErrors {
             sse: [2.0; 12],
