@@ -96,9 +96,10 @@ impl Tape {
 
     fn run_into(&self, vars: &[f64], v: &mut Vec<f64>, out: &mut [f64]) {
         v.clear();
-        v.resize(self.ops.len(), 0.0);
-        for (k, op) in self.ops.iter().enumerate() {
-            v[k] = apply(*op, v, vars);
+        v.reserve(self.ops.len());
+        for &op in &self.ops {
+            let value = apply(op, v, vars);
+            v.push(value);
         }
         for (o, &slot) in out.iter_mut().zip(&self.outputs) {
             *o = v[slot];
