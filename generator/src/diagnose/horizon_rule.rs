@@ -22,10 +22,12 @@ use crate::logs::{on_ground, run_touches_ground};
 /// 100 Hz: the runs overlap by most of the horizon either way).
 pub(crate) const STRIDE: f64 = 0.1;
 
-/// Every how many samples of period `dt` a run starts, for a stride of `seconds` (at least 1).
+/// Every how many samples of period `dt` a run starts, for a stride of `seconds`: the whole
+/// samples within it, ⌊seconds/dt⌋, allowing 1 % of a sample of timestamp jitter (at least 1; at
+/// 30 and 33.3 Hz every 3rd sample for 0.1 s, every 6th for 0.2 s).
 pub(crate) fn stride_samples(seconds: f64, dt: f64) -> usize {
     if dt > 0.0 && (seconds / dt).is_finite() {
-        ((seconds / dt).round() as usize).max(1)
+        ((seconds / dt + 0.01).floor() as usize).max(1)
     } else {
         1
     }
@@ -83,6 +85,10 @@ mod tests {
         assert_eq!(stride_samples(STRIDE, 0.01), 10);
         assert_eq!(stride_samples(STRIDE, 0.02), 5);
         assert_eq!(stride_samples(0.2, 1.0 / 30.0), 6);
+        assert_eq!(stride_samples(0.2, 0.0333334), 6);
+        assert_eq!(stride_samples(0.2, 0.03), 6);
+        assert_eq!(stride_samples(STRIDE, 0.03), 3);
+        assert_eq!(stride_samples(0.2, 0.01), 20);
         assert_eq!(stride_samples(STRIDE, 1.0), 1);
         assert_eq!(stride_samples(STRIDE, 0.0), 1);
     }
