@@ -15,9 +15,11 @@
 //!
 //! ```text
 //! R(d) = mean_q MSE_q(d) / MSE_q(d₀)      12 states, free runs of N samples from every
-//!                                         STRIDE-th training sample (runs that diverge: R = ∞)
-//! d_j  ← argmin R over [min(d₀,j, s_j), max(d₀,j, s_j)]: half-sample steps from d₀,j and the
-//!        bracket's ends, then ± ¼ sample around the best
+//!                                         STRIDE s of training data (runs that diverge: R = ∞)
+//! d_j  ← argmin R over [min(d₀,j, s_j), max(d₀,j, s_j)]: steps of h from d₀,j and the bracket's
+//!        ends, then ± h/2 around the best; h the whole number of half samples nearest to
+//!        GRID_STEP = 1/60 s, at least one (half a sample at 30 Hz and below, 1.5 samples at
+//!        100 Hz)
 //! ```
 //!
 //! d₀ the one-step delays of all kept channels, s_j channel j's cross-correlation delay (no seed:
@@ -31,8 +33,25 @@ use super::catalogue::loops::LoopParams;
 use super::horizon_rule::add_errors;
 use super::problem::{HorizonErrors, Problem, State};
 
-/// Training free runs start at every STRIDE-th sample (a search: sparser than the horizon rule's).
-const STRIDE: usize = 6;
+/// Training free runs start every STRIDE seconds (a search: sparser than the horizon rule's; every
+/// 6th sample at 30 Hz, every 20th at 100 Hz).
+const STRIDE: f64 = 0.2;
+
+/// The step of the delay grid, s, rounded to whole half samples (half a sample at 30 Hz; module
+/// docs).
+const GRID_STEP: f64 = 1.0 / 60.0;
+
+/// The step of the delay grid for samples of `dt`: the whole number of half samples nearest to
+/// [`GRID_STEP`], at least one.
+fn grid_step(dt: f64) -> f64 {
+    let half = 0.5 * dt;
+    let k = (GRID_STEP / half).round();
+    if k.is_finite() && k > 1.0 {
+        k * half
+    } else {
+        half
+    }
+}
 
 /// R of `e` against `reference` (module docs); ∞ when `e` diverges more often or has no samples.
 fn objective(reference: &HorizonErrors, e: &HorizonErrors) -> f64 {
@@ -63,14 +82,14 @@ impl Bracket {
         }
     }
 
-    /// The grid of the first pass: half samples from `start` both ways, and the ends.
-    fn grid(&self, dt: f64) -> Vec<f64> {
+    /// The grid of the first pass: steps of `step` from `start` both ways, and the ends.
+    fn grid(&self, step: f64) -> Vec<f64> {
         let mut g = vec![self.start, self.lo, self.hi];
         for dir in [-1.0, 1.0] {
-            let mut v = self.start + dir * 0.5 * dt;
+            let mut v = self.start + dir * step;
             while v > self.lo + 1e-9 && v < self.hi - 1e-9 {
                 g.push(v);
-                v += dir * 0.5 * dt;
+                v += dir * step;
             }
         }
         g
@@ -115,12 +134,13 @@ pub(crate) fn refine_delays(p: &Problem, state: &State, channels: &[Bracket]) ->
             trial[idx] = v;
             tried.push((v, objective(&reference, &errors(&trial))));
         };
-        for v in c.grid(dt) {
+        let step = grid_step(dt);
+        for v in c.grid(step) {
             try_value(v, &mut tried, &values);
         }
         let coarse = best(&tried);
-        for o in [-0.25, 0.25] {
-            try_value(coarse.0 + o * dt, &mut tried, &values);
+        for o in [-0.5, 0.5] {
+            try_value(coarse.0 + o * step, &mut tried, &values);
         }
         let (v, r) = best(&tried);
         values[idx] = v;
@@ -216,13 +236,24 @@ mod tests {
         assert_eq!(best(&tried), (0.2, 0.9));
     }
 
+    /// The grid step is half a sample at 30 Hz (bit for bit) and below, the whole number of half
+    /// samples nearest to 1/60 s on faster logs.
+    #[test]
+    fn the_grid_step_is_in_seconds() {
+        assert_eq!(grid_step(1.0 / 30.0), 0.5 / 30.0);
+        assert_eq!(grid_step(0.0334), 0.0167);
+        assert_eq!(grid_step(0.1), 0.05);
+        assert!((grid_step(0.01) - 0.015).abs() < 1e-15);
+        assert!((grid_step(0.02) - 0.02).abs() < 1e-15);
+    }
+
     /// The bracket spans the two estimates in either order; its grid stays inside it.
     #[test]
     fn the_bracket_lies_between_the_estimates() {
         let dt = 0.1;
         let b = Bracket::between(1, 0.05, Some(0.2));
         assert_eq!((b.lo, b.hi), (0.05, 0.2));
-        let g = b.grid(dt);
+        let g = b.grid(grid_step(dt));
         assert!(g.iter().all(|v| (0.05 - 1e-12..=0.2 + 1e-12).contains(v)), "{g:?}");
         assert!(g.iter().any(|v| (v - 0.1).abs() < 1e-12) && g.contains(&0.2) && g.contains(&0.05));
         let b = Bracket::between(0, 0.3, Some(0.1));

@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! R = mean_i  MSE_i,after / MSE_i,before      over the 12 states (yaw wrapped), free runs of N
-//!                                             samples from every STRIDE-th held-out sample
+//!                                             samples from a held-out sample every STRIDE s
 //! ```
 //!
 //! R > 1 (or more diverged runs after than before) fails the rule. For `latency` and
@@ -18,8 +18,20 @@ use super::problem::{HorizonErrors, Problem, State};
 use super::shrink::{run, wrapped};
 use crate::logs::{on_ground, run_touches_ground};
 
-/// A run starts at every STRIDE-th held-out sample.
-pub(crate) const STRIDE: usize = 3;
+/// A run starts every STRIDE seconds of held-out data (every 3rd sample at 30 Hz, every 10th at
+/// 100 Hz: the runs overlap by most of the horizon either way).
+pub(crate) const STRIDE: f64 = 0.1;
+
+/// Every how many samples of period `dt` a run starts, for a stride of `seconds`: the whole
+/// samples within it, ⌊seconds/dt⌋, allowing 1 % of a sample of timestamp jitter (at least 1; at
+/// 30 and 33.3 Hz every 3rd sample for 0.1 s, every 6th for 0.2 s).
+pub(crate) fn stride_samples(seconds: f64, dt: f64) -> usize {
+    if dt > 0.0 && (seconds / dt).is_finite() {
+        ((seconds / dt + 0.01).floor() as usize).max(1)
+    } else {
+        1
+    }
+}
 
 /// The horizon errors of the model `state` describes, on the held-out data of every test fit.
 pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {
@@ -31,8 +43,9 @@ pub(crate) fn horizon_errors(p: &Problem, state: &State) -> HorizonErrors {
 }
 
 /// Add to `out` the free runs of N samples of fit `i`'s model (`state` with that fit's parameters)
-/// from every `stride`-th sample of the segments `segs` (runs that touch the ground left out).
-pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], stride: usize, out: &mut HorizonErrors) {
+/// from a sample every `stride` seconds ([`stride_samples`]) of the segments `segs` (runs that
+/// touch the ground left out).
+pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], stride: f64, out: &mut HorizonErrors) {
     let horizon = p.options.horizon;
     let data = p.data.variant(state.destale);
     let aug = p.augmented(state, i);
@@ -40,7 +53,7 @@ pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], s
         let seg = &data[s];
         let seen = aug.seen_inputs(seg);
         let ground = on_ground(&seg.x);
-        for k in (0..seg.len().saturating_sub(horizon)).step_by(stride.max(1)) {
+        for k in (0..seg.len().saturating_sub(horizon)).step_by(stride_samples(stride, seg.dt)) {
             if run_touches_ground(&ground, k, horizon) {
                 continue;
             }
@@ -64,6 +77,21 @@ pub(crate) fn add_errors(p: &Problem, state: &State, i: usize, segs: &[usize], s
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn strides_are_in_seconds() {
+        assert_eq!(stride_samples(STRIDE, 1.0 / 30.0), 3);
+        assert_eq!(stride_samples(STRIDE, 0.0334), 3);
+        assert_eq!(stride_samples(STRIDE, 0.01), 10);
+        assert_eq!(stride_samples(STRIDE, 0.02), 5);
+        assert_eq!(stride_samples(0.2, 1.0 / 30.0), 6);
+        assert_eq!(stride_samples(0.2, 0.0333334), 6);
+        assert_eq!(stride_samples(0.2, 0.03), 6);
+        assert_eq!(stride_samples(STRIDE, 0.03), 3);
+        assert_eq!(stride_samples(0.2, 0.01), 20);
+        assert_eq!(stride_samples(STRIDE, 1.0), 1);
+        assert_eq!(stride_samples(STRIDE, 0.0), 1);
+    }
 
     #[test]
     fn the_ratio_is_the_mean_per_state_mse_ratio() {

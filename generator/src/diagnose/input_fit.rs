@@ -111,6 +111,7 @@ fn scan_channel(
     let fin = p.final_fit();
     let dt = p.dt();
     let o = &p.options;
+    let scope = p.scope(state, (j < 4).then_some(j), j >= 4);
     let mut points: Vec<Point> = Vec::new();
     let add = |points: &mut Vec<Point>, v: f64| {
         if points.iter().any(|q| (q.value - v).abs() < 1e-12) {
@@ -154,6 +155,7 @@ fn scan_channel(
             }
         }
     }
+    drop(scope);
     points.sort_by(|a, b| a.value.total_cmp(&b.value));
     let chosen: Vec<f64> = (0..p.fits.len())
         .map(|i| points[argmin(&points, i, &aff)].value)

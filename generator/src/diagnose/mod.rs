@@ -29,6 +29,7 @@ mod corrected;
 mod data;
 mod design;
 mod envelope;
+mod fcache;
 pub mod fit;
 mod horizon_fit;
 mod horizon_rule;
@@ -491,6 +492,7 @@ fn run(
         floor: floor(&data),
         mask,
         seeds: seeds(where_report.as_ref()),
+        seen: Default::default(),
     };
     let (state, rounds) = select::select(
         &problem,

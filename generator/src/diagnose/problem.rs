@@ -8,11 +8,15 @@ use super::catalogue::inputs::InputTransform;
 use super::catalogue::linear::{linear_kinds, linear_parameters, Context};
 use super::catalogue::EffectKind;
 use super::data::Prepared;
+use super::data::SegData;
+use super::design::seen_f;
 use super::design::{design, Design};
+use super::fcache::SeenCache;
 use super::fit::Normal;
 use super::residuals::Base;
 use super::score::{sums_masked, Sums};
 use super::DiagnoseOptions;
+use std::cell::RefCell;
 use std::ops::Range;
 
 /// The shortest span of `latency`'s delay scan, s (10 samples at 30 Hz; twice the longest
@@ -48,9 +52,22 @@ pub(crate) struct Problem<'a> {
     /// Per input, the delay the residual analysis's cross-correlation found (s), if any: a grid
     /// point of `channel_response`'s scan.
     pub seeds: [Option<f64>; 4],
+    /// f′ of the scan under way ([`super::fcache`]; set by [`Problem::scope`]).
+    pub seen: RefCell<Option<SeenCache>>,
 }
 
-impl Problem<'_> {
+/// Clears [`Problem::seen`] when the scan it was set for ends.
+pub(crate) struct Scope<'p, 'a> {
+    p: &'p Problem<'a>,
+}
+
+impl Drop for Scope<'_, '_> {
+    fn drop(&mut self) {
+        self.p.seen.replace(None);
+    }
+}
+
+impl<'a> Problem<'a> {
     /// The median sample period of the segments, s.
     pub fn dt(&self) -> f64 {
         let mut dts: Vec<f64> = self.data.raw.iter().map(|s| s.dt).collect();
@@ -89,6 +106,24 @@ impl Problem<'_> {
     /// The fit on all training data, whose parameters are reported and written.
     pub fn final_fit(&self) -> usize {
         self.fits.len() - 1
+    }
+
+    /// f′ of `seg` under `tr` ([`seen_f`]), from the scan's cache when one is set.
+    pub fn seen_f(&self, seg: &SegData, tr: &InputTransform) -> Vec<[f64; 12]> {
+        match &*self.seen.borrow() {
+            Some(c) => c.seen_f(seg, self.base, tr),
+            None => seen_f(seg, self.base, tr),
+        }
+    }
+
+    /// Cache f′ for a scan of `state`'s transform varied in `input` (None: only acceleration
+    /// lags vary; `row_lag`: an acceleration row's lag is scanned) until the returned guard drops.
+    pub fn scope(&self, state: &State, input: Option<usize>, row_lag: bool) -> Scope<'_, 'a> {
+        let segs: Vec<&SegData> = self.data.variant(state.destale).iter().collect();
+        let ends = row_lag || state.transform.accel_lag.iter().any(Option::is_some);
+        let cache = SeenCache::new(self.base, &segs, &state.transform, input, ends);
+        self.seen.replace(cache);
+        Scope { p: self }
     }
 
     /// The model `state` describes with the parameters of fit `i`, to step exactly.

@@ -84,9 +84,11 @@ impl Base {
 
     /// ẋ = f(x, u).
     pub fn f(&self, x: &[f64; 12], u: &[f64; 4]) -> [f64; 12] {
-        let v = self.ir.eval_f(x, u);
+        let mut vars = [0.0; 16];
+        vars[..12].copy_from_slice(x);
+        vars[12..].copy_from_slice(u);
         let mut out = [0.0; 12];
-        out.copy_from_slice(&v);
+        self.ir.eval_f_into(&vars, &mut out);
         out
     }
 

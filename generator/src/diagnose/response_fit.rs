@@ -2,8 +2,8 @@
 //! fitted together — the model sees k_j · lag_τ(u_j(t − d_j)) — where `latency` and
 //! `actuator_lag` fit one of them alone.
 //!
-//! The scan: (d, τ) on a grid (delays in whole samples from 0 to `max_delay_samples`, every second
-//! sample first, then every sample and quarter samples around the best; τ ∈ {0} ∪ [`LAGS`]), each
+//! The scan: (d, τ) on a grid (delays in whole samples from 0 to `max_delay_samples`, every
+//! [`COARSE_STEP`] first, then every sample and quarter samples around the best; τ ∈ {0} ∪ [`LAGS`]), each
 //! point scored by the training objective Σ_c ln SSE_c over the rows the input drives (as the
 //! single-effect scans, [`super::candidate`]); the delay the residual cross-correlation finds
 //! (`seed`, the "where" analysis) is always a grid point. At the chosen (d, τ) the gain is fitted
@@ -28,6 +28,20 @@ use super::scored::{finish, under, Candidate, ChannelFit, Install, Params, Score
 
 /// The longest delay scanned is at least this, s.
 pub const MIN_SCAN_DELAY: f64 = 0.4;
+
+/// The step of the coarse delay scan, s, in the whole number of samples nearest to it (2 samples
+/// at 30 Hz, 7 at 100 Hz); the fine scan then takes every sample within one step of the best.
+pub const COARSE_STEP: f64 = 1.0 / 15.0;
+
+/// The coarse scan's step in samples of `dt` (at least 1).
+fn coarse_samples(dt: f64) -> usize {
+    let n = (COARSE_STEP / dt).round();
+    if n.is_finite() && n >= 1.0 {
+        n as usize
+    } else {
+        1
+    }
+}
 
 /// The time constants scanned besides 0 (no lag), s.
 pub const LAGS: [f64; 8] = [0.02, 0.04, 0.07, 0.1, 0.15, 0.2, 0.3, 0.5];
@@ -103,6 +117,7 @@ fn scan(p: &Problem, state: &State, j: usize, aff: &[usize], tau_c: &[f64; 6], s
     let dt = p.dt();
     // At least 0.4 s (a real autopilot's command delay reaches 0.2 s, plus its lag).
     let max_d = p.options.max_delay_samples.max((MIN_SCAN_DELAY / dt).ceil());
+    let _scope = p.scope(state, Some(j), false);
     let mut points: Vec<(f64, f64, Sums)> = Vec::new();
     let add = |points: &mut Vec<(f64, f64, Sums)>, d: f64, tau: f64| {
         if d < -1e-12 || d > max_d * dt + 1e-9 {
@@ -124,9 +139,10 @@ fn scan(p: &Problem, state: &State, j: usize, aff: &[usize], tau_c: &[f64; 6], s
             .unwrap_or(0)
     };
     let taus_all: Vec<f64> = std::iter::once(0.0).chain(LAGS).collect();
-    // Coarse: every second sample (and the seed), every τ.
+    // Coarse: every COARSE_STEP (and the seed), every τ.
+    let step = coarse_samples(dt);
     let coarse: Vec<f64> = (0..=max_d.floor() as usize)
-        .step_by(2)
+        .step_by(step)
         .map(|n| n as f64 * dt)
         .chain(seed)
         .collect();
@@ -135,14 +151,16 @@ fn scan(p: &Problem, state: &State, j: usize, aff: &[usize], tau_c: &[f64; 6], s
             add(&mut points, d, tau);
         }
     }
-    // Fine: around the best, every sample then quarter samples, at its τ and the neighbouring ones.
+    // Fine: within a coarse step of the best, every sample, at its τ and the neighbouring ones;
+    // then quarter samples at the best τ.
     let b = best_of(&points);
     let (d0, t0) = (points[b].0, points[b].1);
     let ti = taus_all.iter().position(|t| *t == t0).unwrap_or(0);
     let near_taus: Vec<f64> = taus_all[ti.saturating_sub(1)..(ti + 2).min(taus_all.len())].to_vec();
+    let reach = step as i64 - 1;
     for &tau in &near_taus {
-        for q in [-1.0, 1.0] {
-            add(&mut points, d0 + q * dt, tau);
+        for q in (-reach..=reach).filter(|&q| q != 0) {
+            add(&mut points, d0 + q as f64 * dt, tau);
         }
     }
     let b = best_of(&points);

@@ -5,7 +5,7 @@
 
 use super::catalogue::inputs::InputTransform;
 use super::catalogue::EffectKind;
-use super::design::{design_from, seen_f};
+use super::design::design_from;
 use super::fit::MAX_LAG;
 use super::horizon_rule::horizon_errors;
 use super::problem::{Current, HorizonErrors, Problem, State};
@@ -260,7 +260,7 @@ pub(crate) fn under(p: &Problem, state: &State, tr: &InputTransform, keep: bool)
         if role.iter().all(|r| r[s] == Role::None) {
             continue;
         }
-        let fs = seen_f(seg, p.base, tr);
+        let fs = p.seen_f(seg, tr);
         let d = design_from(seg, &fs, &p.ctx, &state.linear);
         for (i, th) in state.theta.iter().enumerate() {
             if role[i][s] == Role::None {

@@ -14,7 +14,7 @@
 use super::candidate::evaluate;
 use super::catalogue::inputs::LAG_CHANNELS;
 use super::catalogue::EffectKind;
-use super::design::{design, Design};
+use super::design::{design_from, Design};
 use super::horizon_rule::horizon_errors;
 use super::problem::{current, fit_linear, test_sums, Problem, State};
 use super::score::{sums_masked, Rules, Sums};
@@ -83,6 +83,7 @@ fn backfit(p: &Problem, state: &mut State) {
                 _ => p.options.lag_grid.iter().copied().chain([current]).collect(),
             };
             let mut best = (f64::INFINITY, current);
+            let scope = p.scope(state, (j < 4).then_some(j), kind != EffectKind::Latency && j >= 4);
             for g in grid {
                 let mut tr = state.transform;
                 match kind {
@@ -94,7 +95,7 @@ fn backfit(p: &Problem, state: &mut State) {
                     .enumerate()
                     .map(|(s, seg)| {
                         if train.contains(&s) {
-                            design(seg, p.base, &tr, &p.ctx, &state.linear)
+                            design_from(seg, &p.seen_f(seg, &tr), &p.ctx, &state.linear)
                         } else {
                             Design {
                                 r0: Vec::new(),
@@ -116,6 +117,7 @@ fn backfit(p: &Problem, state: &mut State) {
                     best = (objective, g);
                 }
             }
+            drop(scope);
             match kind {
                 EffectKind::Latency => state.transform.delay[j] = best.1,
                 _ => state.transform.set_lag(j, Some(best.1)),

@@ -100,6 +100,16 @@ impl ModelIr {
         self.f_tape.eval(&self.vars(x, u))
     }
 
+    /// [`ModelIr::eval_f`] into `out` (NX values) without allocating; `vars` = x then u.
+    pub fn eval_f_into(&self, vars: &[f64], out: &mut [f64]) {
+        self.f_tape.eval_into(vars, out)
+    }
+
+    /// The tape of f (variables: x then u), for partial re-evaluation ([`crate::symbolic::Partial`]).
+    pub fn f_tape(&self) -> &Tape {
+        &self.f_tape
+    }
+
     /// (∂f/∂x, ∂f/∂u) as row-major dense matrices (NX×NX, NX×NU).
     pub fn eval_jacobian(&self, x: &[f64], u: &[f64]) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
         let flat = self.jac_tape.eval(&self.vars(x, u));

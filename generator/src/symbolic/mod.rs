@@ -8,5 +8,5 @@ pub mod expr;
 
 pub use diff::{diff, jacobian};
 pub use emit::{float_literal, Emitter, Float, NonFiniteConstant};
-pub use eval::Tape;
+pub use eval::{Partial, Tape};
 pub use expr::{Func, Graph, Id, Node};
