@@ -24,8 +24,10 @@ use crate::model::Model;
 pub(crate) struct ModelInputs {
     /// The input the model sees at every sample.
     pub u: Vec<[f64; NU]>,
-    /// The extra states at every sample: the lag states (input order), then the flight time.
-    extra: Vec<Vec<f64>>,
+    /// The extra states at every sample, `width` per sample in one flat series (no allocation
+    /// per sample): the lag states (input order), then the flight time.
+    extra: Vec<f64>,
+    width: usize,
 }
 
 impl ModelInputs {
@@ -43,7 +45,8 @@ impl ModelInputs {
         let Some(c) = &model.corrections else {
             return Self {
                 u: u.to_vec(),
-                extra: vec![Vec::new(); t.len()],
+                extra: Vec::new(),
+                width: 0,
             };
         };
         let delays: Vec<usize> = model
@@ -65,14 +68,14 @@ impl ModelInputs {
             None => Vec::new(),
         };
         let dot_lags = dot_lag_states(model);
-        let mut extra = Vec::with_capacity(t.len());
+        let width = lags.len() + dot_lags.len() + usize::from(c.thrust_decay.is_some());
+        let mut extra = Vec::with_capacity(t.len() * width);
         for k in 0..t.len() {
-            let mut e = s.clone();
-            e.extend(std::iter::repeat(0.0).take(dot_lags.len()));
+            extra.extend_from_slice(&s);
+            extra.extend(std::iter::repeat(0.0).take(dot_lags.len()));
             if c.thrust_decay.is_some() {
-                e.push(t[k] - t_start);
+                extra.push(t[k] - t_start);
             }
-            extra.push(e);
             if k + 1 < t.len() {
                 let h = t[k + 1] - t[k];
                 for (sj, &(i, tau)) in s.iter_mut().zip(&lags) {
@@ -84,7 +87,7 @@ impl ModelInputs {
         // ℓ: the base rows at both ends of every sample under its input, then the lag over them.
         if !dot_lags.is_empty() && !t.is_empty() {
             let target = |k: usize, u: &[f64; NU]| {
-                let z: Vec<f64> = x[k].iter().chain(&extra[k]).copied().collect();
+                let z: Vec<f64> = x[k].iter().chain(&extra[k * width..(k + 1) * width]).copied().collect();
                 dot_lag_targets(&dot_lags, &z, &ir.eval_f(&z, u))
             };
             let ends: Vec<(Vec<f64>, Vec<f64>)> = (0..t.len() - 1)
@@ -93,7 +96,7 @@ impl ModelInputs {
             let mut ell = target(0, &delayed[0]);
             for k in 0..t.len() {
                 for (i, l) in ell.iter().enumerate() {
-                    extra[k][lags.len() + i] = *l;
+                    extra[k * width + lags.len() + i] = *l;
                 }
                 if let Some((b0, b1)) = ends.get(k) {
                     for (i, &(_, tau)) in dot_lags.iter().enumerate() {
@@ -102,12 +105,19 @@ impl ModelInputs {
                 }
             }
         }
-        Self { u: delayed, extra }
+        Self {
+            u: delayed,
+            extra,
+            width,
+        }
     }
 
     /// The model's full state at sample k: the logged state `x`, then the extra states.
     pub fn state(&self, x: &[f64; NX], k: usize) -> Vec<f64> {
-        x.iter().chain(&self.extra[k]).copied().collect()
+        x.iter()
+            .chain(&self.extra[k * self.width..(k + 1) * self.width])
+            .copied()
+            .collect()
     }
 }
 

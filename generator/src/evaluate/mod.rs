@@ -18,6 +18,7 @@
 
 mod inputs;
 mod plot;
+mod pooled;
 
 pub use plot::{plot_states, write_svg, PlotKind};
 
@@ -25,10 +26,12 @@ use crate::discretize::{auto_substeps, discrete_step, Envelope, SubstepError};
 use crate::identify::dataset::{build, DatasetError, DatasetOptions};
 use crate::ir::ModelIr;
 use crate::logs::{median, on_ground, run_touches_ground, FlightLog, Segment, StalePolicy, YAW};
-use crate::metrics::{compare, Metrics, MetricsError};
+use crate::metrics::{Metrics, MetricsError};
 use crate::model::Model;
 use inputs::{logged, ModelInputs};
+use pooled::{MeanBook, Stat};
 use serde::Serialize;
+use std::borrow::Cow;
 use std::fmt;
 
 /// Default horizon: the MPC's N = 30 samples.
@@ -219,38 +222,6 @@ fn finite(x: &[f64]) -> bool {
     x.iter().all(|v| v.is_finite() && v.abs() <= DIVERGENCE_BOUND)
 }
 
-/// Predicted and observed rows of one kind, with yaw errors wrapped.
-#[derive(Clone, Default)]
-struct Pool {
-    predicted: Vec<Vec<f64>>,
-    observed: Vec<Vec<f64>>,
-}
-
-impl Pool {
-    /// `yaw`: the column holding yaw, if any; its prediction is replaced by
-    /// observed + wrapped difference.
-    fn push(&mut self, predicted: &[f64], observed: &[f64], yaw: Option<usize>) {
-        let mut p = predicted.to_vec();
-        if let Some(j) = yaw {
-            p[j] = observed[j] + wrap_angle(predicted[j] - observed[j]);
-        }
-        self.predicted.push(p);
-        self.observed.push(observed.to_vec());
-    }
-
-    fn extend(&mut self, other: &Pool) {
-        self.predicted.extend(other.predicted.iter().cloned());
-        self.observed.extend(other.observed.iter().cloned());
-    }
-
-    fn metrics(&self, names: &[String]) -> Result<Option<Metrics>, MetricsError> {
-        if self.predicted.is_empty() {
-            return Ok(None);
-        }
-        compare(&self.predicted, &self.observed, names).map(Some)
-    }
-}
-
 /// Sum of squared errors (all states) and count of runs at each horizon step.
 #[derive(Clone, Default)]
 struct StepErrors {
@@ -294,91 +265,117 @@ impl StepErrors {
     }
 }
 
-/// Everything accumulated for one log (or all logs).
-#[derive(Clone)]
+/// Everything accumulated for one log (or all logs): streamed pools ([`Stat`]) and counts.
 struct Acc {
-    derivative: Pool,
+    derivative: Stat,
     derivative_made: usize,
-    next: Pool,
+    next: Stat,
     next_made: usize,
-    horizon: Pool,
-    horizon_end: Pool,
-    horizon_no_change: Pool,
+    horizon: Stat,
+    horizon_end: Stat,
+    horizon_no_change: Stat,
     steps: StepErrors,
     horizon_runs: usize,
     horizon_diverged: usize,
     horizon_on_ground: usize,
-    whole: Pool,
+    whole: Stat,
     whole_runs: usize,
     whole_diverged: usize,
 }
 
 impl Acc {
-    fn new(h: usize) -> Self {
+    fn new(h: usize, book: &mut MeanBook) -> Self {
         Self {
-            derivative: Pool::default(),
+            derivative: book.stat(DYNAMIC_STATES.len()),
             derivative_made: 0,
-            next: Pool::default(),
+            next: book.stat(NX),
             next_made: 0,
-            horizon: Pool::default(),
-            horizon_end: Pool::default(),
-            horizon_no_change: Pool::default(),
+            horizon: book.stat(NX),
+            horizon_end: book.stat(NX),
+            horizon_no_change: book.stat(NX),
             steps: StepErrors::new(h),
             horizon_runs: 0,
             horizon_diverged: 0,
             horizon_on_ground: 0,
-            whole: Pool::default(),
+            whole: book.stat(NX),
             whole_runs: 0,
             whole_diverged: 0,
         }
     }
 
-    fn merge(&mut self, o: &Acc) {
-        self.derivative.extend(&o.derivative);
+    /// Add another accumulator's counts and step errors (its pools were pushed to this one's as
+    /// they were to it, row by row, so that the sums are in pooled sample order).
+    fn add_counts(&mut self, o: &Acc) {
         self.derivative_made += o.derivative_made;
-        self.next.extend(&o.next);
         self.next_made += o.next_made;
-        self.horizon.extend(&o.horizon);
-        self.horizon_end.extend(&o.horizon_end);
-        self.horizon_no_change.extend(&o.horizon_no_change);
         self.steps.merge(&o.steps);
         self.horizon_runs += o.horizon_runs;
         self.horizon_diverged += o.horizon_diverged;
         self.horizon_on_ground += o.horizon_on_ground;
-        self.whole.extend(&o.whole);
         self.whole_runs += o.whole_runs;
         self.whole_diverged += o.whole_diverged;
     }
 
     #[allow(clippy::type_complexity)]
-    fn finish(&self, h: usize, names: &[String]) -> Result<(OneStep, OneStep, Horizon, WholeFlight), MetricsError> {
+    fn finish(
+        &self,
+        h: usize,
+        names: &[String],
+        book: &mut MeanBook,
+    ) -> Result<(OneStep, OneStep, Horizon, WholeFlight), MetricsError> {
         let dyn_names = &names[DYNAMIC_STATES];
         let derivative = OneStep {
             predictions: self.derivative_made,
-            excluded: self.derivative_made - self.derivative.predicted.len(),
-            metrics: self.derivative.metrics(dyn_names)?,
+            excluded: self.derivative_made - self.derivative.len(),
+            metrics: self.derivative.metrics(dyn_names, book)?,
         };
         let next = OneStep {
             predictions: self.next_made,
-            excluded: self.next_made - self.next.predicted.len(),
-            metrics: self.next.metrics(names)?,
+            excluded: self.next_made - self.next.len(),
+            metrics: self.next.metrics(names, book)?,
         };
         let horizon = Horizon {
             horizon: h,
             runs: self.horizon_runs,
             diverged: self.horizon_diverged,
             on_ground: self.horizon_on_ground,
-            metrics: self.horizon.metrics(names)?,
-            end: self.horizon_end.metrics(names)?,
+            metrics: self.horizon.metrics(names, book)?,
+            end: self.horizon_end.metrics(names, book)?,
             rmse_by_step: self.steps.rmse(),
-            no_change: self.horizon_no_change.metrics(names)?,
+            no_change: self.horizon_no_change.metrics(names, book)?,
         };
         let whole = WholeFlight {
             runs: self.whole_runs,
             diverged: self.whole_diverged,
-            metrics: self.whole.metrics(names)?,
+            metrics: self.whole.metrics(names, book)?,
         };
         Ok((derivative, next, horizon, whole))
+    }
+}
+
+/// Push a row into a log's pool and into the pool of all logs.
+fn push2(a: &mut Stat, b: &mut Stat, predicted: &[f64], observed: &[f64], yaw: Option<usize>) {
+    a.push(predicted, observed, yaw);
+    b.push(predicted, observed, yaw);
+}
+
+/// Which pass of [`evaluate`]: `Means` runs no model and takes every prediction as the
+/// observation (the pooled observations, hence the provisional means of the d₁ denominators,
+/// are then those of the real pass unless a prediction diverges); `Model` runs the model.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Pass {
+    Means,
+    Model,
+}
+
+/// The log as the stale-row policy sees it: borrowed when the policy changes nothing (no copy
+/// of a big log).
+fn stale_view(log: &FlightLog, policy: StalePolicy) -> Cow<'_, FlightLog> {
+    let changes = policy == StalePolicy::Interpolate && log.segments.iter().any(|s| s.stale_flags().iter().any(|f| *f));
+    if changes {
+        Cow::Owned(log.with_stale(policy))
+    } else {
+        Cow::Borrowed(log)
     }
 }
 
@@ -513,49 +510,103 @@ fn horizon_run(
 
 /// Evaluate `model` on `logs`: one-step (derivative and next sample), horizon free runs and
 /// whole-flight free runs, per segment, per log and pooled over all logs.
+///
+/// The predictions are streamed into their metrics, never stored (memory: the logs, one log's
+/// derivative targets and a few series per segment; docs/evaluate.md). The d₁ of a pool needs
+/// its observations' mean, so the metrics are made in one pass with means computed beforehand
+/// from the logs alone, and in a second pass over the same predictions where a diverged or
+/// excluded prediction changed a pool's mean (see `pooled.rs`); the figures are those of
+/// [`compare`](crate::metrics::compare) on the pooled rows, to the bit.
 pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) -> Result<Evaluation, EvaluateError> {
+    let mut means = MeanBook::default();
+    // Failures of the means pass are found again, in their order, by the model pass.
+    let _ = evaluate_pass(model, logs, options, Pass::Means, &mut means);
+    let mut book = MeanBook::with_means(means.found());
+    let evaluation = evaluate_pass(model, logs, options, Pass::Model, &mut book)?;
+    if book.exact() {
+        return Ok(evaluation);
+    }
+    let mut exact = MeanBook::with_means(book.found());
+    evaluate_pass(model, logs, options, Pass::Model, &mut exact)
+}
+
+fn evaluate_pass(
+    model: &Model,
+    logs: &[FlightLog],
+    options: &EvaluateOptions,
+    pass: Pass,
+    book: &mut MeanBook,
+) -> Result<Evaluation, EvaluateError> {
     if logs.is_empty() {
         return Err(EvaluateError::NoLogs);
     }
-    let logs: Vec<FlightLog> = logs.iter().map(|l| l.with_stale(options.stale)).collect();
-    let logs = logs.as_slice();
     let mut st = Stepper::new(model, options)?;
     let names = model.base_states().to_vec();
     let h = options.horizon;
-    let dataset = match build(logs, &options.dataset) {
-        Ok(d) => Some(d),
-        Err(DatasetError::Empty { .. }) => None,
-        Err(e) => return Err(e.into()),
-    };
+    let model_pass = pass == Pass::Model;
 
-    let mut total = Acc::new(h);
+    let mut total = Acc::new(h, book);
     let mut per_log = Vec::with_capacity(logs.len());
-    for (li, log) in logs.iter().enumerate() {
-        let mut acc = Acc::new(h);
-        // 1a. One-step derivative on the dataset's (possibly filtered, trimmed) samples.
-        for seg in dataset.iter().flat_map(|d| &d.segments).filter(|s| s.log == li) {
+    for log in logs {
+        let log = stale_view(log, options.stale);
+        let log = log.as_ref();
+        let mut acc = Acc::new(h, book);
+        // 1a. One-step derivative on the dataset's (possibly filtered, trimmed) samples, built
+        //     for this log alone and dropped after use.
+        let dataset = match build(std::slice::from_ref(log), &options.dataset) {
+            Ok(d) => Some(d),
+            Err(DatasetError::Empty { .. }) => None,
+            Err(e) => return Err(e.into()),
+        };
+        for seg in dataset.iter().flat_map(|d| &d.segments) {
+            if !model_pass {
+                for dx in &seg.dx {
+                    acc.derivative_made += 1;
+                    let d = &dx[DYNAMIC_STATES];
+                    push2(&mut acc.derivative, &mut total.derivative, d, d, None);
+                }
+                continue;
+            }
             let (inputs, offset) = derivative_inputs(model, &st.ir, log, seg, options);
             for (j, (x, dx)) in seg.x.iter().zip(&seg.dx).enumerate() {
                 acc.derivative_made += 1;
                 let f = st.ir.eval_f(&inputs.state(x, offset + j), &inputs.u[offset + j]);
                 if finite(&f) {
-                    acc.derivative.push(&f[DYNAMIC_STATES], &dx[DYNAMIC_STATES], None);
+                    push2(
+                        &mut acc.derivative,
+                        &mut total.derivative,
+                        &f[DYNAMIC_STATES],
+                        &dx[DYNAMIC_STATES],
+                        None,
+                    );
                 }
             }
         }
+        drop(dataset);
         let mut segments = Vec::new();
         for (si, seg) in log.segments.iter().enumerate() {
             let n = seg.len();
             let Some(dt) = segment_dt(seg) else {
                 continue;
             };
-            let m = st.substeps(dt, &log.source, si)?;
-            let inputs = ModelInputs::new(model, &st.ir, &seg.t, &seg.x, &seg.u, seg.t[0], dt);
+            let (m, inputs) = if model_pass {
+                let m = st.substeps(dt, &log.source, si)?;
+                (
+                    m,
+                    Some(ModelInputs::new(model, &st.ir, &seg.t, &seg.x, &seg.u, seg.t[0], dt)),
+                )
+            } else {
+                (1, None)
+            };
             // 1b. One-step next sample.
             for k in 0..n - 1 {
                 acc.next_made += 1;
-                if let Some(p) = st.step(&inputs.state(&seg.x[k], k), &inputs.u[k], dt, m) {
-                    acc.next.push(&p[..NX], &seg.x[k + 1], Some(YAW));
+                let p = match &inputs {
+                    Some(inputs) => st.step(&inputs.state(&seg.x[k], k), &inputs.u[k], dt, m),
+                    None => Some(seg.x[k + 1].to_vec()),
+                };
+                if let Some(p) = p {
+                    push2(&mut acc.next, &mut total.next, &p[..NX], &seg.x[k + 1], Some(YAW));
                 }
             }
             // 2. Horizon free runs from every sample with a full horizon after it, clear of the
@@ -569,29 +620,62 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
                 }
                 runs += 1;
                 for j in 1..=h {
-                    acc.horizon_no_change.push(&seg.x[k], &seg.x[k + j], Some(YAW));
+                    push2(
+                        &mut acc.horizon_no_change,
+                        &mut total.horizon_no_change,
+                        &seg.x[k],
+                        &seg.x[k + j],
+                        Some(YAW),
+                    );
                 }
-                let pred = horizon_run(&st, seg, &inputs, k, h, dt, m);
+                let pred = match &inputs {
+                    Some(inputs) => horizon_run(&st, seg, inputs, k, h, dt, m),
+                    None => seg.x[k + 1..=k + h].to_vec(),
+                };
                 for (j, p) in pred.iter().enumerate() {
-                    acc.horizon.push(p, &seg.x[k + j + 1], Some(YAW));
+                    push2(&mut acc.horizon, &mut total.horizon, p, &seg.x[k + j + 1], Some(YAW));
                     acc.steps.add(j, p, &seg.x[k + j + 1]);
                 }
                 if pred.len() == h {
-                    acc.horizon_end.push(&pred[h - 1], &seg.x[k + h], Some(YAW));
+                    push2(
+                        &mut acc.horizon_end,
+                        &mut total.horizon_end,
+                        &pred[h - 1],
+                        &seg.x[k + h],
+                        Some(YAW),
+                    );
                 } else {
                     diverged += 1;
                     first_diverged.get_or_insert(k);
                 }
             }
+            drop(ground);
             acc.horizon_runs += runs;
             acc.horizon_diverged += diverged;
-            // 3. Whole-flight free run.
-            let (pred, diverged_at) = free_run(&st, seg, &inputs, dt, m);
-            let mut pool = Pool::default();
-            for k in 1..pred.len() {
-                pool.push(&pred[k], &seg.x[k], Some(YAW));
+            // 3. Whole-flight free run, streamed.
+            let mut pool = book.stat(NX);
+            let mut diverged_at = None;
+            match &inputs {
+                Some(inputs) => {
+                    let mut x = inputs.state(&seg.x[0], 0);
+                    for k in 0..n - 1 {
+                        let Some(next) = st.step(&x, &inputs.u[k], dt, m) else {
+                            diverged_at = Some(k + 1);
+                            break;
+                        };
+                        let p = logged(&next);
+                        pool.push(&p, &seg.x[k + 1], Some(YAW));
+                        push2(&mut acc.whole, &mut total.whole, &p, &seg.x[k + 1], Some(YAW));
+                        x = next;
+                    }
+                }
+                None => {
+                    for o in &seg.x[1..] {
+                        pool.push(o, o, Some(YAW));
+                        push2(&mut acc.whole, &mut total.whole, o, o, Some(YAW));
+                    }
+                }
             }
-            acc.whole.extend(&pool);
             acc.whole_runs += 1;
             acc.whole_diverged += diverged_at.is_some() as usize;
             segments.push(SegmentEvaluation {
@@ -603,14 +687,14 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
                 substeps: m,
                 diverged_at,
                 diverged_t: diverged_at.map(|k| seg.t[k]),
-                whole_flight: pool.metrics(&names)?,
+                whole_flight: pool.metrics(&names, book)?,
                 horizon_runs: runs,
                 horizon_diverged: diverged,
                 first_diverged_horizon: first_diverged,
             });
         }
-        let (one_step_derivative, one_step_next, horizon, whole_flight) = acc.finish(h, &names)?;
-        total.merge(&acc);
+        let (one_step_derivative, one_step_next, horizon, whole_flight) = acc.finish(h, &names, book)?;
+        total.add_counts(&acc);
         per_log.push(LogEvaluation {
             source: log.source.clone(),
             one_step_derivative,
@@ -645,7 +729,7 @@ pub fn evaluate(model: &Model, logs: &[FlightLog], options: &EvaluateOptions) ->
             longest,
         });
     }
-    let (one_step_derivative, one_step_next, horizon, whole_flight) = total.finish(h, &names)?;
+    let (one_step_derivative, one_step_next, horizon, whole_flight) = total.finish(h, &names, book)?;
     Ok(Evaluation {
         model: model.name.clone(),
         model_kind: model.kind_name().to_string(),
@@ -687,15 +771,15 @@ pub fn horizon_score(
     if logs.is_empty() {
         return Err(EvaluateError::NoLogs);
     }
-    let logs: Vec<FlightLog> = logs.iter().map(|l| l.with_stale(options.stale)).collect();
-    let logs = logs.as_slice();
     let mut st = Stepper::new(model, options)?;
     let names = model.base_states().to_vec();
     let h = options.horizon;
     let stride = stride.max(1);
-    let mut pool = Pool::default();
+    let mut pool = MeanBook::default().stat(NX);
     let (mut runs, mut diverged, mut on_ground_runs, mut next_made) = (0usize, 0usize, 0usize, 0usize);
     for log in logs {
+        let log = stale_view(log, options.stale);
+        let log = log.as_ref();
         for (si, seg) in log.segments.iter().enumerate() {
             let n = seg.len();
             let Some(dt) = segment_dt(seg) else {
@@ -748,7 +832,7 @@ pub fn horizon_score(
     Ok(HorizonScore {
         runs,
         diverged,
-        overall_rmse: pool.metrics(&names)?.map(|m| m.overall_rmse),
+        overall_rmse: pool.overall_rmse(&names)?,
     })
 }
 

@@ -11,6 +11,7 @@
 mod error;
 mod parse;
 mod quality;
+pub mod resample;
 mod segments;
 pub mod stale;
 
