@@ -541,11 +541,12 @@ def identify(logs: Any, method: str = "sindy", out: Optional[PathLike] = None, n
              alpha: Optional[float] = None, horizon_check: bool = True, criterion: str = "bic",
              input_delay: Any = "auto", stale: str = "interpolate", targets: Optional[str] = None,
              refine_loops: Union[bool, str] = True, mass: float = 2.4, lowpass: Optional[float] = None,
-             progress: bool = False) -> Model:
+             max_rate: float = 100.0, progress: bool = False) -> Model:
     """``uavgen identify``: a SINDy (``method="sindy"``) or PD (``"pd"``) model from flight logs
     (Logs or paths, read with ``profile``), with the CLI's defaults. The keyword arguments are the
     CLI's flags (``--savgol-window`` is ``savgol_window``, ``--no-horizon-check`` is
-    ``horizon_check=False``, ``--refine-loops none`` is ``refine_loops=False``; ``input_delay`` is
+    ``horizon_check=False``, ``--refine-loops none`` is ``refine_loops=False``, ``--max-rate`` is
+    ``max_rate``; ``input_delay`` is
     ``"auto"``, ``"none"``, seconds, or ``"u_vz=0.13,…"``). The model is named ``name``, else
     ``out``'s stem, else ``identified``; ``out`` also writes the file (byte for byte what
     ``uavgen identify --out`` writes). Warnings are issued as UavgenWarning; with
@@ -563,7 +564,8 @@ def identify(logs: Any, method: str = "sindy", out: Optional[PathLike] = None, n
     text, warns, _lines = _uavgen.identify(
         _logs(logs, profile), method, name, None if out is None else _path(out), savgol_window, savgol_order,
         library, all_rows, optimizer, threshold, sweep, None if sweep_values is None else [float(v) for v in sweep_values],
-        alpha, horizon_check, criterion, input_delay, stale, targets, bool(refine_loops), float(mass), lowpass, progress,
+        alpha, horizon_check, criterion, input_delay, stale, targets, bool(refine_loops), float(mass), lowpass,
+        float(max_rate), progress,
     )
     _warn(warns)
     if out is None:

@@ -153,6 +153,11 @@ pub struct IdentifyArgs {
     /// PD: the paper's first-order low-pass λ/(s+λ) with this λ in rad/s (the paper: 1).
     #[arg(long)]
     lowpass: Option<f64>,
+    /// Logs at least twice this fast (Hz) are low-passed (delay-free) and decimated to the largest
+    /// whole factor keeping at least this rate, with a note (a 1 kHz log → 100 Hz; docs/logs.md,
+    /// "Resampling").
+    #[arg(long, default_value_t = uavgen::logs::resample::DEFAULT_MAX_RATE_HZ)]
+    max_rate: f64,
 }
 
 impl IdentifyArgs {
@@ -199,6 +204,7 @@ impl IdentifyArgs {
             refine_loops: self.refine_loops == RefineLoopsArg::Auto,
             mass: self.mass,
             lowpass: self.lowpass,
+            max_rate_hz: self.max_rate,
             ..IdentifyOptions::new(method, &name)
         }
     }

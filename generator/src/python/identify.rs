@@ -34,7 +34,7 @@ impl Report for Collect {
 /// for dashes; the CLI's defaults): (the model file's text, its warnings, the messages the CLI
 /// prints on stderr).
 #[pyfunction]
-#[pyo3(signature = (logs, method, name, out_label = None, savgol_window = None, savgol_order = 3, library = "physics", all_rows = false, optimizer = "stlsq", threshold = None, sweep = false, sweep_values = None, alpha = None, horizon_check = true, criterion = "bic", input_delay = "auto".to_string(), stale = "interpolate", targets = None, refine_loops = true, mass = 2.4, lowpass = None, progress = false))]
+#[pyo3(signature = (logs, method, name, out_label = None, savgol_window = None, savgol_order = 3, library = "physics", all_rows = false, optimizer = "stlsq", threshold = None, sweep = false, sweep_values = None, alpha = None, horizon_check = true, criterion = "bic", input_delay = "auto".to_string(), stale = "interpolate", targets = None, refine_loops = true, mass = 2.4, lowpass = None, max_rate = crate::logs::resample::DEFAULT_MAX_RATE_HZ, progress = false))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -59,6 +59,7 @@ fn identify(
     refine_loops: bool,
     mass: f64,
     lowpass: Option<f64>,
+    max_rate: f64,
     progress: bool,
 ) -> PyResult<(String, Vec<String>, Vec<String>)> {
     let one_of =
@@ -105,6 +106,7 @@ fn identify(
         refine_loops,
         mass,
         lowpass,
+        max_rate_hz: max_rate,
         ..IdentifyOptions::new(method, name)
     };
     options.validate().map_err(err)?;

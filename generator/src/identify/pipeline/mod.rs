@@ -25,6 +25,7 @@ use super::pd::{self, PdFitOptions};
 use super::preprocess::{LowPass, SavGol};
 use super::response::{self, InputResponse};
 use super::sindy::{Criterion, LibraryKind};
+use crate::logs::resample;
 use crate::logs::stale::StalePolicy;
 use crate::logs::FlightLog;
 use crate::model::envelope;
@@ -80,6 +81,9 @@ pub struct IdentifyOptions {
     pub mass: f64,
     /// PD: the paper's low-pass λ, rad/s.
     pub lowpass: Option<f64>,
+    /// Logs at least twice this fast (Hz) are low-passed and decimated towards it before anything
+    /// else ([`resample`]); the CLI's --max-rate.
+    pub max_rate_hz: f64,
 }
 
 impl IdentifyOptions {
@@ -106,6 +110,7 @@ impl IdentifyOptions {
             refine_loops: true,
             mass: 2.4,
             lowpass: None,
+            max_rate_hz: resample::DEFAULT_MAX_RATE_HZ,
         }
     }
 
@@ -121,6 +126,7 @@ impl IdentifyOptions {
                 check_positive("lowpass", lambda)?;
             }
         }
+        check_positive("max-rate", self.max_rate_hz)?;
         if let Some(t) = self.threshold {
             if !(t.is_finite() && t >= 0.0) {
                 return Err(format!("--threshold: must be a finite number >= 0, got {t}"));
@@ -332,9 +338,17 @@ fn constant_log(log: &FlightLog) -> bool {
 }
 
 /// The logs as the fit sees them: each one's quality warnings and stale rows said, the stale
-/// policy applied.
-fn prepared_logs(logs: &[FlightLog], stale: StalePolicy, report: &dyn Report) -> Vec<FlightLog> {
-    logs.iter()
+/// policy applied, then resampled to `max_rate_hz` if at least twice as fast (said, and returned
+/// for the provenance).
+fn prepared_logs(
+    logs: &[FlightLog],
+    stale: StalePolicy,
+    max_rate_hz: f64,
+    report: &dyn Report,
+) -> (Vec<FlightLog>, Vec<serde_json::Value>) {
+    let mut resampled = Vec::new();
+    let logs = logs
+        .iter()
         .map(|log| {
             for w in log.report.warnings() {
                 report.line(&format!("warning: {}: {w}", log.source));
@@ -350,9 +364,15 @@ fn prepared_logs(logs: &[FlightLog], stale: StalePolicy, report: &dyn Report) ->
                     }
                 ));
             }
-            log.with_stale(stale)
+            let (log, note) = resample::for_identification(log, stale, max_rate_hz);
+            if let Some(note) = note {
+                report.line(&note.to_string());
+                resampled.push(note.to_json());
+            }
+            log
         })
-        .collect()
+        .collect();
+    (logs, resampled)
 }
 
 /// Identify a model from `logs` (as loaded: [`crate::logs::load_any`]) with `options`: the text
@@ -360,7 +380,7 @@ fn prepared_logs(logs: &[FlightLog], stale: StalePolicy, report: &dyn Report) ->
 pub fn identify(logs: &[FlightLog], options: &IdentifyOptions, report: &dyn Report) -> Result<Identified, String> {
     options.validate()?;
     let delay_spec = parse_delay_spec(&options.input_delay)?;
-    let logs = prepared_logs(logs, options.stale, report);
+    let (logs, resampled) = prepared_logs(logs, options.stale, options.max_rate_hz, report);
     // Degenerate data is an error: with every state and input constant (an all-zero log, a
     // vehicle on the ground) there is nothing to fit, and the fit would have no terms.
     if logs.iter().all(constant_log) {
@@ -420,6 +440,9 @@ pub fn identify(logs: &[FlightLog], options: &IdentifyOptions, report: &dyn Repo
             Targets::Trapezoid => "integral",
         },
     });
+    if !resampled.is_empty() {
+        provenance["resampled"] = serde_json::Value::Array(resampled);
+    }
     if let Some((est, refined)) = &estimate {
         provenance["input_response"] = delays::input_response_json(est, refined.as_ref());
     }
