@@ -41,6 +41,13 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
         .map(|(t, f)| (t.to_string(), SeriesBuilder::new(f)))
         .collect();
     let mut decoders: HashMap<u16, Decoder> = HashMap::new();
+    // A field longer than its record: read the records before it, then say where it broke
+    // (the `mcap` crate would allocate the declared length first; docs/import.md).
+    let damage = super::mcap_lengths::first_oversized_field(bytes);
+    let bytes = match &damage {
+        Some((at, _)) => &bytes[..*at],
+        None => bytes,
+    };
     let stream = ::mcap::MessageStream::new(bytes).map_err(|e| {
         ImportError::new(
             file,
@@ -116,6 +123,13 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
             || format!("message {count} (log time {log_time} s)"),
             |f| values.get(f).copied(),
         )?;
+    }
+    if let Some((at, what)) = damage {
+        let after = match last_time {
+            Some(t) => format!("after message {count} (log time {t} s)"),
+            None => "before the first message".into(),
+        };
+        rec.broken = Some(format!("the file breaks {after}: damaged at byte {at}: {what}"));
     }
     for (topic, b) in builders {
         rec.series.insert(topic, b.series);

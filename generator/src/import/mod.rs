@@ -13,6 +13,7 @@ pub mod dataflash;
 pub mod error;
 pub mod frames;
 pub mod mcap;
+mod mcap_lengths;
 pub mod profile;
 pub mod recording;
 pub mod rosmsg;

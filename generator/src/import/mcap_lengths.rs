@@ -1,0 +1,174 @@
+//! A length check of MCAP records before the `mcap` crate parses them.
+//!
+//! The crate (through binrw) allocates every length-prefixed string or byte field by its declared
+//! length before reading it, so a damaged length (a fuzzed Channel record claiming a 4 GB topic
+//! name, found by `scripts/fuzz.sh`) asks for gigabytes from a 14 KB file: an abort where
+//! allocations are not overcommitted. This walks the records (top level, and the records of
+//! uncompressed chunks) and finds the first field whose declared length exceeds what its record
+//! declares; the import then reads only the records before it and reports the damage.
+
+/// A field of a record's fixed layout (the MCAP specification, records section).
+#[derive(Clone, Copy)]
+enum Field {
+    /// `n` bytes.
+    Fixed(usize),
+    /// A u32 byte length and that many bytes (String, Bytes, a Map or an Array).
+    Prefixed32,
+    /// A u64 byte length and that many bytes (a Chunk's records, an Attachment's data).
+    Prefixed64,
+}
+
+use Field::{Fixed, Prefixed32 as P32, Prefixed64 as P64};
+
+/// The record's name and its fields up to the last length-prefixed one.
+fn layout(opcode: u8) -> Option<(&'static str, &'static [Field])> {
+    Some(match opcode {
+        0x01 => ("Header", &[P32, P32]),
+        0x03 => ("Schema", &[Fixed(2), P32, P32, P32]),
+        0x04 => ("Channel", &[Fixed(2), Fixed(2), P32, P32, P32]),
+        0x06 => ("Chunk", &[Fixed(8), Fixed(8), Fixed(8), Fixed(4), P32, P64]),
+        0x07 => ("MessageIndex", &[Fixed(2), P32]),
+        0x08 => ("ChunkIndex", &[Fixed(32), P32, Fixed(8), P32]),
+        0x09 => ("Attachment", &[Fixed(16), P32, P32, P64]),
+        0x0A => ("AttachmentIndex", &[Fixed(40), P32, P32]),
+        0x0B => ("Statistics", &[Fixed(42), P32]),
+        0x0C => ("Metadata", &[P32, P32]),
+        0x0D => ("MetadataIndex", &[Fixed(16), P32]),
+        _ => return None,
+    })
+}
+
+/// The first record (its byte offset, and what is wrong) with a field longer than the record, in
+/// `bytes` (a whole MCAP file, magic included). `None`: every declared length fits.
+pub fn first_oversized_field(bytes: &[u8]) -> Option<(usize, String)> {
+    scan(bytes, super::mcap::MAGIC.len(), bytes.len(), true)
+}
+
+/// The records in `bytes[at..end]`; the records of an uncompressed chunk too when `top`.
+fn scan(bytes: &[u8], mut at: usize, end: usize, top: bool) -> Option<(usize, String)> {
+    while at.checked_add(9).is_some_and(|e| e <= end) {
+        let opcode = bytes[at];
+        let len = u64_at(bytes, at + 1)?;
+        let body = at + 9;
+        // The record as declared (it may run past the file: truncation is the reader's to report).
+        let declared_end = (body as u64).saturating_add(len);
+        if let Some((name, fields)) = layout(opcode) {
+            let mut pos = body;
+            let mut last = None;
+            for (i, f) in fields.iter().enumerate() {
+                let (prefix, n) = match f {
+                    Field::Fixed(n) => (0, *n as u64),
+                    Field::Prefixed32 => (4, u32_at(bytes, pos)? as u64),
+                    Field::Prefixed64 => (8, u64_at(bytes, pos)?),
+                };
+                let start = pos as u64 + prefix;
+                if start.saturating_add(n) > declared_end {
+                    return Some((
+                        at,
+                        format!(
+                            "its {name} record's field {} declares {n} bytes, more than the record's {len}",
+                            i + 1
+                        ),
+                    ));
+                }
+                last = Some((start, n));
+                pos = usize::try_from(start + n).ok()?;
+            }
+            // An uncompressed chunk's records (the compression string is the 5th field).
+            if top && opcode == 0x06 {
+                let compression_len = u32_at(bytes, body + 28)?;
+                if let (0, Some((start, n))) = (compression_len, last) {
+                    let start = usize::try_from(start).ok()?;
+                    let stop = usize::try_from(start as u64 + n).ok()?.min(bytes.len());
+                    if let Some(found) = scan(bytes, start, stop, false) {
+                        return Some(found);
+                    }
+                }
+            }
+        }
+        at = usize::try_from(declared_end).ok()?;
+    }
+    None
+}
+
+/// The little-endian u32 at `at`, if the bytes are there.
+fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(bytes.get(at..at.checked_add(4)?)?.try_into().ok()?))
+}
+
+/// The little-endian u64 at `at`, if the bytes are there.
+fn u64_at(bytes: &[u8], at: usize) -> Option<u64> {
+    Some(u64::from_le_bytes(bytes.get(at..at.checked_add(8)?)?.try_into().ok()?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An MCAP file of `records` (opcode, body) after the magic.
+    fn file(records: &[(u8, Vec<u8>)]) -> Vec<u8> {
+        let mut out = super::super::mcap::MAGIC.to_vec();
+        for (op, body) in records {
+            out.push(*op);
+            out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+            out.extend_from_slice(body);
+        }
+        out
+    }
+
+    fn string(s: &[u8]) -> Vec<u8> {
+        let mut out = (s.len() as u32).to_le_bytes().to_vec();
+        out.extend_from_slice(s);
+        out
+    }
+
+    fn channel(topic_len: u32) -> Vec<u8> {
+        let mut body = vec![1, 0, 1, 0];
+        body.extend_from_slice(&topic_len.to_le_bytes());
+        body.extend_from_slice(b"/pose");
+        body.extend(string(b"cdr"));
+        body.extend_from_slice(&0u32.to_le_bytes());
+        body
+    }
+
+    fn chunk(records: &[u8]) -> Vec<u8> {
+        let mut body = vec![0; 24];
+        body.extend_from_slice(&0u32.to_le_bytes());
+        body.extend(string(b""));
+        body.extend_from_slice(&(records.len() as u64).to_le_bytes());
+        body.extend_from_slice(records);
+        body
+    }
+
+    #[test]
+    fn well_formed_records_pass() {
+        let header = [string(b"ros2"), string(b"uavgen")].concat();
+        let f = file(&[(0x01, header), (0x04, channel(5))]);
+        assert_eq!(first_oversized_field(&f), None);
+    }
+
+    #[test]
+    fn a_string_longer_than_its_record_is_found_at_the_record() {
+        let header = [string(b"ros2"), string(b"uavgen")].concat();
+        let f = file(&[(0x01, header.clone()), (0x04, channel(0xFFFF_FF00))]);
+        let (at, what) = first_oversized_field(&f).expect("found");
+        assert_eq!(at, 8 + 9 + header.len());
+        assert!(
+            what.contains("Channel record's field 3 declares 4294967040 bytes"),
+            "{what}"
+        );
+    }
+
+    #[test]
+    fn inside_an_uncompressed_chunk_too() {
+        let inner = file(&[(0x04, channel(1 << 30))]);
+        let f = file(&[(0x06, chunk(&inner[8..]))]);
+        let (at, what) = first_oversized_field(&f).expect("found");
+        assert_eq!(at, 8 + 9 + 24 + 4 + 4 + 8);
+        assert!(what.contains("Channel"), "{what}");
+        // A truncated file (the chunk declared longer than the bytes left) is not this check's.
+        let mut cut = file(&[(0x06, chunk(&file(&[(0x04, channel(5))])[8..]))]);
+        cut.truncate(cut.len() - 3);
+        assert_eq!(first_oversized_field(&cut), None);
+    }
+}
