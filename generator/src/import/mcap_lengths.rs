@@ -41,17 +41,37 @@ fn layout(opcode: u8) -> Option<(&'static str, &'static [Field])> {
 /// The first record (its byte offset, and what is wrong) with a field longer than the record, in
 /// `bytes` (a whole MCAP file, magic included). `None`: every declared length fits.
 pub fn first_oversized_field(bytes: &[u8]) -> Option<(usize, String)> {
-    scan(bytes, super::mcap::MAGIC.len(), bytes.len(), true)
+    scan(bytes, super::mcap::MAGIC.len(), bytes.len(), None)
 }
 
-/// The records in `bytes[at..end]`; the records of an uncompressed chunk too when `top`.
-fn scan(bytes: &[u8], mut at: usize, end: usize, top: bool) -> Option<(usize, String)> {
+/// The records in `bytes[at..end]`; inside an uncompressed chunk whose records end at
+/// `chunk_end` (as declared) when given, else at the top level (where such chunks are walked too).
+fn scan(bytes: &[u8], mut at: usize, end: usize, chunk_end: Option<u64>) -> Option<(usize, String)> {
+    // Inside a chunk every record must fit in the chunk's records as declared: the `mcap` crate
+    // slices past its buffer otherwise (a panic in mcap 0.26's linear reader, found by fuzzing).
+    if let Some(stop) = chunk_end {
+        let left = stop.saturating_sub(at as u64);
+        if (1..9).contains(&left) && at < end {
+            return Some((
+                at,
+                format!("{left} bytes at the end of a chunk's records are no record"),
+            ));
+        }
+    }
     while at.checked_add(9).is_some_and(|e| e <= end) {
         let opcode = bytes[at];
         let len = u64_at(bytes, at + 1)?;
         let body = at + 9;
         // The record as declared (it may run past the file: truncation is the reader's to report).
         let declared_end = (body as u64).saturating_add(len);
+        if let Some(stop) = chunk_end.filter(|stop| declared_end > *stop) {
+            return Some((
+                at,
+                format!(
+                    "the record (opcode 0x{opcode:02x}) declares {len} bytes, past the end of its chunk's records at byte {stop}"
+                ),
+            ));
+        }
         if let Some((name, fields)) = layout(opcode) {
             let mut pos = body;
             let mut last = None;
@@ -75,18 +95,28 @@ fn scan(bytes: &[u8], mut at: usize, end: usize, top: bool) -> Option<(usize, St
                 pos = usize::try_from(start + n).ok()?;
             }
             // An uncompressed chunk's records (the compression string is the 5th field).
-            if top && opcode == 0x06 {
+            if chunk_end.is_none() && opcode == 0x06 {
                 let compression_len = u32_at(bytes, body + 28)?;
                 if let (0, Some((start, n))) = (compression_len, last) {
+                    let records_end = start + n;
                     let start = usize::try_from(start).ok()?;
-                    let stop = usize::try_from(start as u64 + n).ok()?.min(bytes.len());
-                    if let Some(found) = scan(bytes, start, stop, false) {
+                    let stop = usize::try_from(records_end).ok()?.min(bytes.len());
+                    if let Some(found) = scan(bytes, start, stop, Some(records_end)) {
                         return Some(found);
                     }
                 }
             }
         }
         at = usize::try_from(declared_end).ok()?;
+        if let Some(stop) = chunk_end {
+            let left = stop.saturating_sub(at as u64);
+            if (1..9).contains(&left) && at < end {
+                return Some((
+                    at,
+                    format!("{left} bytes at the end of a chunk's records are no record"),
+                ));
+            }
+        }
     }
     None
 }
@@ -166,6 +196,13 @@ mod tests {
         let (at, what) = first_oversized_field(&f).expect("found");
         assert_eq!(at, 8 + 9 + 24 + 4 + 4 + 8);
         assert!(what.contains("Channel"), "{what}");
+        // A record running past its chunk's records.
+        let mut inner = file(&[(0x04, channel(5))]);
+        let n = inner.len();
+        inner[9..17].copy_from_slice(&((n - 8 - 9 + 4) as u64).to_le_bytes());
+        let f = file(&[(0x06, chunk(&inner[8..]))]);
+        let (_, what) = first_oversized_field(&f).expect("found");
+        assert!(what.contains("past the end of its chunk's records"), "{what}");
         // A truncated file (the chunk declared longer than the bytes left) is not this check's.
         let mut cut = file(&[(0x06, chunk(&file(&[(0x04, channel(5))])[8..]))]);
         cut.truncate(cut.len() - 3);
