@@ -94,16 +94,26 @@ fn scan(bytes: &[u8], mut at: usize, end: usize, chunk_end: Option<u64>) -> Opti
                 last = Some((start, n));
                 pos = usize::try_from(start + n).ok()?;
             }
-            // An uncompressed chunk's records (the compression string is the 5th field).
+            // A chunk's records (the compression string is the 5th field): walked in place when
+            // uncompressed, after decompressing them when zstd-compressed.
             if chunk_end.is_none() && opcode == 0x06 {
                 let compression_len = u32_at(bytes, body + 28)?;
-                if let (0, Some((start, n))) = (compression_len, last) {
-                    let records_end = start + n;
-                    let start = usize::try_from(start).ok()?;
-                    let stop = usize::try_from(records_end).ok()?.min(bytes.len());
-                    if let Some(found) = scan(bytes, start, stop, Some(records_end)) {
-                        return Some(found);
+                let compression = bytes.get(body + 32..body + 32 + compression_len as usize);
+                match (compression, last) {
+                    (Some(b""), Some((start, n))) => {
+                        let records_end = start + n;
+                        let start = usize::try_from(start).ok()?;
+                        let stop = usize::try_from(records_end).ok()?.min(bytes.len());
+                        if let Some(found) = scan(bytes, start, stop, Some(records_end)) {
+                            return Some(found);
+                        }
                     }
+                    (Some(b"zstd"), Some((start, n))) => {
+                        if let Some(found) = scan_zstd_chunk(bytes, body, start, n) {
+                            return Some((at, found));
+                        }
+                    }
+                    _ => {}
                 }
             }
         }
@@ -119,6 +129,30 @@ fn scan(bytes: &[u8], mut at: usize, end: usize, chunk_end: Option<u64>) -> Opti
         }
     }
     None
+}
+
+/// What is wrong in the records of the zstd-compressed chunk whose body starts at `body`, with its
+/// compressed records at `bytes[start..start + n]`: they are decompressed (at most the chunk's
+/// declared uncompressed size, growing only with the bytes the stream really yields, so a damaged
+/// size asks for nothing) and walked as an uncompressed chunk's. A stream that does not decompress
+/// is not this check's: the `mcap` crate reports it.
+fn scan_zstd_chunk(bytes: &[u8], body: usize, start: u64, n: u64) -> Option<String> {
+    use std::io::Read;
+    let declared = u64_at(bytes, body + 16)?;
+    let start = usize::try_from(start).ok()?;
+    let stop = usize::try_from(start as u64 + n).ok()?.min(bytes.len());
+    let compressed = bytes.get(start..stop)?;
+    let mut records = Vec::new();
+    zstd::stream::read::Decoder::new(compressed)
+        .ok()?
+        .take(declared)
+        .read_to_end(&mut records)
+        .ok()?;
+    let (at, what) = scan(&records, 0, records.len(), Some(records.len() as u64))?;
+    Some(format!(
+        "in its zstd-compressed records, at byte {at} of {} decompressed: {what}",
+        records.len()
+    ))
 }
 
 /// The little-endian u32 at `at`, if the bytes are there.
@@ -170,6 +204,18 @@ mod tests {
         body
     }
 
+    /// A zstd-compressed chunk of `records`, declaring `declared` uncompressed bytes.
+    fn zstd_chunk(records: &[u8], declared: u64) -> Vec<u8> {
+        let packed = zstd::bulk::compress(records, 3).expect("compress");
+        let mut body = vec![0; 16];
+        body.extend_from_slice(&declared.to_le_bytes());
+        body.extend_from_slice(&0u32.to_le_bytes());
+        body.extend(string(b"zstd"));
+        body.extend_from_slice(&(packed.len() as u64).to_le_bytes());
+        body.extend_from_slice(&packed);
+        body
+    }
+
     #[test]
     fn well_formed_records_pass() {
         let header = [string(b"ros2"), string(b"uavgen")].concat();
@@ -207,5 +253,34 @@ mod tests {
         let mut cut = file(&[(0x06, chunk(&file(&[(0x04, channel(5))])[8..]))]);
         cut.truncate(cut.len() - 3);
         assert_eq!(first_oversized_field(&cut), None);
+    }
+
+    #[test]
+    fn inside_a_zstd_chunk_too() {
+        let good = file(&[(0x04, channel(5))]);
+        let f = file(&[(0x06, zstd_chunk(&good[8..], (good.len() - 8) as u64))]);
+        assert_eq!(first_oversized_field(&f), None);
+        // A 1 GiB topic name inside the compressed records: found at the chunk, located inside.
+        let bad = file(&[(0x04, channel(1 << 30))]);
+        let n = (bad.len() - 8) as u64;
+        let f = file(&[(0x06, zstd_chunk(&bad[8..], n))]);
+        let (at, what) = first_oversized_field(&f).expect("found");
+        assert_eq!(at, 8);
+        assert!(
+            what.contains("zstd-compressed records, at byte 0 of 33 decompressed")
+                && what.contains("Channel record's field 3 declares 1073741824 bytes"),
+            "{what}"
+        );
+        // A damaged declared size (2^60) allocates nothing: the stream yields what it holds.
+        let f = file(&[(0x06, zstd_chunk(&bad[8..], 1 << 60))]);
+        assert!(first_oversized_field(&f).is_some());
+        // A stream that is no zstd is left to the mcap crate.
+        let mut f = file(&[(0x06, zstd_chunk(&good[8..], (good.len() - 8) as u64))]);
+        let magic = f
+            .windows(4)
+            .position(|w| w == [0x28, 0xB5, 0x2F, 0xFD])
+            .expect("zstd magic");
+        f[magic..magic + 4].fill(0xAB);
+        assert_eq!(first_oversized_field(&f), None);
     }
 }
