@@ -16,7 +16,7 @@ use super::error::{ImportError, ImportErrorKind};
 use super::profile::Clock;
 use super::recording::{Damage, Recording, SeriesBuilder};
 use super::rosmsg::{header_stamp, Definition, Wire};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 
 /// The first 13 bytes of a ROS bag 2.0.
 pub const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
@@ -126,15 +126,8 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
             "not a ROS 1 bag: it does not start with `#ROSBAG V2.0`",
         ));
     }
-    let mut wanted: BTreeMap<&str, Vec<String>> = BTreeMap::new();
-    for (topic, field) in needs {
-        wanted.entry(topic.as_str()).or_default().push(field.clone());
-    }
     let mut rec = Recording::new(file, "ROS 1 bag");
-    let mut builders: BTreeMap<String, SeriesBuilder> = wanted
-        .iter()
-        .map(|(t, f)| (t.to_string(), SeriesBuilder::new(f)))
-        .collect();
+    let mut builders = SeriesBuilder::for_needs(needs);
     let mut connections: HashMap<u32, Connection> = HashMap::new();
     let mut values: HashMap<String, f64> = HashMap::new();
 

@@ -12,7 +12,7 @@
 
 use super::error::{ImportError, ImportErrorKind};
 use super::recording::{Damage, Recording, SeriesBuilder};
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeSet, HashMap};
 
 /// The first two bytes of every record.
 pub const HEAD: [u8; 2] = [0xA3, 0x95];
@@ -149,15 +149,8 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)]) -> Result<Reco
             "not an ArduPilot DataFlash log: it does not start with the record head A3 95",
         ));
     }
-    let mut wanted: BTreeMap<&str, Vec<String>> = BTreeMap::new();
-    for (topic, field) in needs {
-        wanted.entry(topic.as_str()).or_default().push(field.clone());
-    }
     let mut rec = Recording::new(file, "ArduPilot DataFlash");
-    let mut builders: BTreeMap<String, SeriesBuilder> = wanted
-        .iter()
-        .map(|(t, f)| (t.to_string(), SeriesBuilder::new(f)))
-        .collect();
+    let mut builders = SeriesBuilder::for_needs(needs);
     let mut formats: HashMap<u8, MsgFormat> = HashMap::new();
     let mut instances: BTreeSet<String> = BTreeSet::new();
     let mut pos = 0usize;

@@ -11,7 +11,7 @@ use super::error::{ImportError, ImportErrorKind};
 use super::profile::Clock;
 use super::recording::{Recording, SeriesBuilder};
 use super::rosmsg::{header_stamp, Definition, Wire};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 
 /// The first 8 bytes of every MCAP file.
 pub const MAGIC: &[u8] = b"\x89MCAP0\r\n";
@@ -31,15 +31,8 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
             "not an MCAP file: it does not start with the MCAP magic bytes `\\x89MCAP0\\r\\n`",
         ));
     }
-    let mut wanted: BTreeMap<&str, Vec<String>> = BTreeMap::new();
-    for (topic, field) in needs {
-        wanted.entry(topic.as_str()).or_default().push(field.clone());
-    }
     let mut rec = Recording::new(file, "MCAP");
-    let mut builders: BTreeMap<String, SeriesBuilder> = wanted
-        .iter()
-        .map(|(t, f)| (t.to_string(), SeriesBuilder::new(f)))
-        .collect();
+    let mut builders = SeriesBuilder::for_needs(needs);
     let mut decoders: HashMap<u16, Decoder> = HashMap::new();
     // A field longer than its record: read the records before it, then say where it broke
     // (the `mcap` crate would allocate the declared length first; docs/import.md).

@@ -259,6 +259,18 @@ pub struct SeriesBuilder {
 }
 
 impl SeriesBuilder {
+    /// One builder per topic of the requested `(topic, field)` pairs, each collecting its fields.
+    pub fn for_needs(needs: &[(String, String)]) -> BTreeMap<String, SeriesBuilder> {
+        let mut wanted: BTreeMap<&str, Vec<String>> = BTreeMap::new();
+        for (topic, field) in needs {
+            wanted.entry(topic.as_str()).or_default().push(field.clone());
+        }
+        wanted
+            .into_iter()
+            .map(|(t, f)| (t.to_string(), SeriesBuilder::new(&f)))
+            .collect()
+    }
+
     pub fn new(fields: &[String]) -> Self {
         let mut series = Series::default();
         for f in fields {

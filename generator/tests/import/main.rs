@@ -20,6 +20,18 @@ use uavgen::import::{import_bytes, Format, ImportErrorKind, ImportOptions, Profi
 use uavgen::logs::{parse_log, FlightLog};
 use ulog_writer::{Topic, ULogWriter};
 
+/// `uavgen import INPUT --profile px4 --out OUT`.
+fn import_px4(input: &Path, out: &Path) -> std::process::Output {
+    uavgen(&[
+        "import",
+        input.to_str().unwrap(),
+        "--profile",
+        "px4",
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
 /// A short simulated flight (two segments with a gap between them) as the simulator writes it,
 /// and as the log reader reads it.
 fn simulated() -> (String, FlightLog) {
@@ -455,14 +467,7 @@ fn cli_import_writes_atomically_and_fails_cleanly() {
     let bad = tmp.path().join("bad.ulg");
     std::fs::write(&bad, b"ULog\x01\x12\x35\x01garbage").unwrap();
     let out2 = tmp.path().join("bad.csv");
-    let r = uavgen(&[
-        "import",
-        bad.to_str().unwrap(),
-        "--profile",
-        "px4",
-        "--out",
-        out2.to_str().unwrap(),
-    ]);
+    let r = import_px4(&bad, &out2);
     assert!(!r.status.success());
     assert!(stderr(&r).starts_with("error: "), "{}", stderr(&r));
     assert!(!out2.exists());

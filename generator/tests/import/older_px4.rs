@@ -204,14 +204,7 @@ fn the_cli_prints_the_chosen_sources_on_stderr() {
     let ulg = tmp.path().join("old.ulg");
     std::fs::write(&ulg, older_px4_ulog(&sim, &Older::default())).unwrap();
     let out = tmp.path().join("old.csv");
-    let r = uavgen(&[
-        "import",
-        ulg.to_str().unwrap(),
-        "--profile",
-        "px4",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let r = import_px4(&ulg, &out);
     assert!(r.status.success(), "{}", stderr(&r));
     let err = stderr(&r);
     assert!(
@@ -271,14 +264,7 @@ fn nan_in_a_state_field_names_topic_field_and_time() {
     let ulg = tmp.path().join("nan.ulg");
     std::fs::write(&ulg, &bytes).unwrap();
     let out = tmp.path().join("nan.csv");
-    let r = uavgen(&[
-        "import",
-        ulg.to_str().unwrap(),
-        "--profile",
-        "px4",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let r = import_px4(&ulg, &out);
     assert!(!r.status.success());
     assert!(stderr(&r).contains("field `xyz[2]` is inf at t = "), "{}", stderr(&r));
     assert!(!out.exists());
