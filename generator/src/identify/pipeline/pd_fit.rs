@@ -5,7 +5,6 @@
 use super::{stage, IdentifyOptions, Report};
 use crate::identify::dataset::{build, Dataset, DatasetOptions, Targets};
 use crate::identify::excitation::Excitation;
-use crate::identify::loop_refine::RefineOptions;
 use crate::identify::pd;
 use crate::identify::preprocess::SavGol;
 use crate::identify::response::InputResponse;
@@ -50,14 +49,14 @@ pub(super) fn fit(
             .map_err(|e| e.to_string())?;
             &interval
         };
-        let refine = RefineOptions::for_period(dt);
+        let refine = pd::refine::options_for_period(dt);
         Some((data, refine))
     } else {
         None
     };
     if let Some((_, refine)) = &refinement {
         report.line(&format!(
-            "then refining its attitude loops by simulation error (--refine-loops auto: ξ2, ξ5, ξ8 and ξ3, ξ6, ξ9 on free runs of {} samples every {} samples, at most {} runs, held out by log; kept at a {:.0} % held-out gain)",
+            "then refining its attitude loops by simulation error (--refine-loops auto: ξ2, ξ5, ξ8 and ξ3, ξ6, ξ9 on free runs of {} samples every {} samples, at most {} runs, held out by log or block; kept at a {:.0} % held-out gain)",
             refine.horizon,
             refine.stride,
             refine.max_windows,
