@@ -76,7 +76,7 @@ pub struct IdentifyOptions {
     pub stale: StalePolicy,
     /// `None`: integral targets for SINDy, derivative targets for PD.
     pub targets: Option<Targets>,
-    /// SINDy: the loop refinement (`--refine-loops auto`).
+    /// The loop refinement (`--refine-loops auto`): SINDy's command loops, PD's attitude loops.
     pub refine_loops: bool,
     /// PD: mass, kg.
     pub mass: f64,
