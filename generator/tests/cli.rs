@@ -783,14 +783,25 @@ fn identify_defaults_on_the_m100_logs() {
     // 0.039 → 0.027) and the loops stiffen (stiffness ×3.2 and ×1.9; roll ω_n 6.4 rad/s, ζ 0.64),
     // within the fit's bounds (damping ≥ Ix / 1 s = 0.05).
     let loops = &v["provenance"]["loop_refinement"]["loops"];
-    let xi: Vec<f64> = v["xi"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    let xi: Vec<f64> = v["xi"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
     for (row, [gain, stiffness, damping]) in [("roll_rate", [2, 5, 8]), ("pitch_rate", [3, 6, 9])] {
         let l = &loops[row];
         assert_eq!(l["kept"], true, "{row}: {l}");
         let rmse = l["held_out_free_run_rmse"].as_array().unwrap();
-        assert!(rmse[1].as_f64().unwrap() < 0.8 * rmse[0].as_f64().unwrap(), "{row}: {l}");
+        assert!(
+            rmse[1].as_f64().unwrap() < 0.8 * rmse[0].as_f64().unwrap(),
+            "{row}: {l}"
+        );
         let fitted = &l["equation_error_fit"];
-        assert!(xi[stiffness - 1] > 1.5 * fitted[format!("xi{stiffness}")].as_f64().unwrap(), "{row}: {l}");
+        assert!(
+            xi[stiffness - 1] > 1.5 * fitted[format!("xi{stiffness}")].as_f64().unwrap(),
+            "{row}: {l}"
+        );
         assert!(xi[gain - 1] > 0.0 && xi[damping - 1] >= 0.05, "{row}: {xi:?}");
     }
 }
@@ -929,7 +940,14 @@ fn identify_pd_refines_the_attitude_loops_unless_told_not_to() {
     let tmp = tempfile::tempdir().unwrap();
     let log = excitation_log(tmp.path(), "m100_like");
     let read = |p: &Path| -> serde_json::Value { serde_json::from_str(&fs::read_to_string(p).unwrap()).unwrap() };
-    let xi = |v: &serde_json::Value| -> Vec<f64> { v["xi"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect() };
+    let xi = |v: &serde_json::Value| -> Vec<f64> {
+        v["xi"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
     let refined = tmp.path().join("refined.json");
     let o = identify("pd", &log, &refined, &[]);
     let err = stderr(&o);
@@ -946,12 +964,24 @@ fn identify_pd_refines_the_attitude_loops_unless_told_not_to() {
     let mut moved = Vec::new();
     for (state, angle, ks) in [("roll_rate", "roll", [2, 5, 8]), ("pitch_rate", "pitch", [3, 6, 9])] {
         let l = &loops[state];
-        assert!(err.contains(&format!("  {state:<10} judged by {angle}")), "{state}: {err}");
+        assert!(
+            err.contains(&format!("  {state:<10} judged by {angle}")),
+            "{state}: {err}"
+        );
         assert_eq!(l["judged_by"], angle);
         for k in ks {
-            assert_eq!(l["equation_error_fit"][format!("xi{k}")].as_f64(), Some(xb[k - 1]), "{state} ξ{k}");
+            assert_eq!(
+                l["equation_error_fit"][format!("xi{k}")].as_f64(),
+                Some(xb[k - 1]),
+                "{state} ξ{k}"
+            );
         }
-        let rmse: Vec<f64> = l["held_out_free_run_rmse"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let rmse: Vec<f64> = l["held_out_free_run_rmse"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
         if l["kept"] == true {
             assert!(rmse[1] * rmse[1] <= 0.95 * rmse[0] * rmse[0], "{state}: {l}");
             assert!(ks.iter().any(|&k| xa[k - 1] != xb[k - 1]), "{state}: {l}");
@@ -960,7 +990,10 @@ fn identify_pd_refines_the_attitude_loops_unless_told_not_to() {
             assert!(l["note"].is_string(), "{state}: {l}");
         }
         // Within the bounds: gain and stiffness ≥ 0, damping ≥ I / 1 s (inertias 0.05).
-        assert!(xa[ks[0] - 1] >= 0.0 && xa[ks[1] - 1] >= 0.0 && xa[ks[2] - 1] >= 0.05, "{xa:?}");
+        assert!(
+            xa[ks[0] - 1] >= 0.0 && xa[ks[1] - 1] >= 0.0 && xa[ks[2] - 1] >= 0.05,
+            "{xa:?}"
+        );
     }
     for k in (1..=16).filter(|k| !moved.contains(k)) {
         assert_eq!(xa[k - 1], xb[k - 1], "ξ{k}");
