@@ -643,17 +643,17 @@ mod tests {
     #[test]
     fn never_leaves_the_bounds_never_raises_the_criterion() {
         let options = RefineOptions::default();
-        let cases: [(f64, f64, f64, f64, f64, f64, f64, f64); 5] = [
+        let cases: [[f64; 8]; 5] = [
             // (plant ω_n, ζ, gain; start ω_n, ζ, gain; noise; lower bound on ξ8 in units of Ix)
-            (12.0, 0.8, 1.0, 6.7, 0.4, 0.9, 0.002, 1.0),
-            (8.0, 0.5, 0.8, 14.0, 1.2, 1.3, 0.004, 1.0),
-            (10.0, 0.3, 1.0, 10.0, 0.3, 1.0, 0.003, 1.0),
+            [12.0, 0.8, 1.0, 6.7, 0.4, 0.9, 0.002, 1.0],
+            [8.0, 0.5, 0.8, 14.0, 1.2, 1.3, 0.004, 1.0],
+            [10.0, 0.3, 1.0, 10.0, 0.3, 1.0, 0.003, 1.0],
             // The true damping 2 ζ ω_n = 4.8 /s is below the bound 12 /s: the refinement ends on it.
-            (12.0, 0.2, 1.0, 5.0, 1.2, 0.7, 0.002, 12.0),
+            [12.0, 0.2, 1.0, 5.0, 1.2, 0.7, 0.002, 12.0],
             // Starting with no stiffness and no gain (on their bound 0).
-            (9.0, 0.7, 1.0, 0.0, 0.0, 0.0, 0.002, 1.0),
+            [9.0, 0.7, 1.0, 0.0, 0.0, 0.0, 0.002, 1.0],
         ];
-        for (i, &(wn, zeta, gain, w0, z0, g0, noise, tau_inv)) in cases.iter().enumerate() {
+        for (i, &[wn, zeta, gain, w0, z0, g0, noise, tau_inv]) in cases.iter().enumerate() {
             let data = roll_data(wn, zeta, gain, noise, 1 + 2 * (i % 2));
             let mut lo = lower();
             lo[7] = tau_inv * IX;

@@ -35,9 +35,9 @@ pub(super) fn fit(
     let interval;
     let refinement = if options.refine_loops {
         let data = if dataset.is_interval_form() {
-            dataset
+            Some(dataset)
         } else {
-            interval = build(
+            match build(
                 logs,
                 &DatasetOptions {
                     savgol,
@@ -45,12 +45,20 @@ pub(super) fn fit(
                     targets: Targets::Trapezoid,
                     ..DatasetOptions::default()
                 },
-            )
-            .map_err(|e| e.to_string())?;
-            &interval
+            ) {
+                Ok(d) => {
+                    interval = d;
+                    Some(&interval)
+                }
+                Err(e) => {
+                    report.line(&format!(
+                        "loop refinement: skipped (the integral form of the logs: {e})"
+                    ));
+                    None
+                }
+            }
         };
-        let refine = pd::refine::options_for_period(dt);
-        Some((data, refine))
+        data.map(|d| (d, pd::refine::options_for_period(dt)))
     } else {
         None
     };
