@@ -139,11 +139,12 @@ pub struct IdentifyArgs {
     /// `derivative`: Savitzky-Golay derivatives at the samples (docs/sindy.md, "Targets").
     #[arg(long, value_enum)]
     targets: Option<TargetsArg>,
-    /// SINDy: refine the rows the commands drive (vz, roll_rate, pitch_rate, yaw_rate) by
-    /// simulation error: their selected terms' coefficients are fitted to free runs of one MPC
+    /// Refine the loops the commands drive by simulation error: fitted to free runs of one MPC
     /// horizon on the logs (roll and pitch judged by the angle), cross-validated over the logs
-    /// and kept where the held-out free runs improve by 5 % (`auto`, the default; integral
-    /// targets only); `none` keeps the sparse regression's coefficients
+    /// and kept where the held-out free runs improve by 5 % (`auto`, the default). SINDy: the
+    /// selected terms' coefficients of vz, roll_rate, pitch_rate, yaw_rate (integral targets
+    /// only); PD: the attitude loops' gain, stiffness and damping ξ2, ξ5, ξ8 and ξ3, ξ6, ξ9,
+    /// within the fit's bounds. `none` keeps the regression's coefficients
     /// (docs/identification.md, "Loop refinement").
     #[arg(long, value_enum, default_value_t = RefineLoopsArg::Auto)]
     refine_loops: RefineLoopsArg,

@@ -9,11 +9,13 @@
 
 pub mod bvls;
 mod checks;
+pub mod refine;
 pub mod regressors;
 
 pub use checks::{FreeRun, FreeRunLimits, FREE_RUN_LIMITS, STABILITY_TOLERANCE};
 
 use super::dataset::Dataset;
+use super::loop_refine::{LoopRefinement, RefineOptions};
 use super::preprocess::{try_columnwise, LowPass, PreprocessError};
 use crate::model::{parse, Model, ModelError, PdFile, FORMAT};
 use nalgebra::{DMatrix, DVector};
@@ -389,6 +391,25 @@ fn rms(sum_sq: f64, n: usize) -> f64 {
     }
 }
 
+/// The bounds of ξk (1-based) in the bounded least squares (and in the loop refinement):
+/// |ξ11| ≤ (1 − margin) m, inertias ≥ `min_inertia`, a rate damping ≥ I/τ with known inertias
+/// ([`PdFitOptions::max_rate_time_constant`]), every other ξ ≥ 0.
+pub fn bounds(options: &PdFitOptions, k: usize) -> (f64, f64) {
+    let inf = f64::INFINITY;
+    let min_damping = match (&options.scale, options.max_rate_time_constant) {
+        (PdScale::Inertia(i), Some(tau)) if (8..=10).contains(&k) => i[k - 8] / tau,
+        _ => 0.0,
+    };
+    match k {
+        11 => {
+            let xi11_max = (1.0 - options.xi11_margin) * options.mass;
+            (-xi11_max, xi11_max)
+        }
+        14..=16 => (options.min_inertia, inf),
+        _ => (min_damping, inf),
+    }
+}
+
 /// Solve one group; `columns` are the ξ of the columns of `a`.
 fn solve_group(
     a: &DMatrix<f64>,
@@ -551,6 +572,62 @@ pub fn fit(
     name: &str,
     provenance: serde_json::Value,
 ) -> Result<PdFit, PdFitError> {
+    fit_refined(dataset, options, None, name, provenance).map(|(fit, _)| fit)
+}
+
+/// What the loop refinement did ([`fit_refined`]).
+#[derive(Clone, Debug)]
+pub struct PdRefinement {
+    pub options: RefineOptions,
+    /// One report per loop of [`refine::PD_LOOPS`] (terms: ("xiK", fitted, refined)).
+    pub loops: Vec<LoopRefinement>,
+    /// The equation-error fit's model, to fall back on should the refined model fail a later check
+    /// (`provenance.loop_refinement.reverted` says so); `None` when no loop was refined.
+    pub unrefined: Option<Box<PdFit>>,
+}
+
+impl PdRefinement {
+    /// `provenance.loop_refinement`: SINDy's record ([`crate::identify::loop_refine`]), the
+    /// equation-error fit's ξ of each loop under `equation_error_fit`.
+    pub fn record(&self) -> serde_json::Value {
+        let loops: serde_json::Map<String, serde_json::Value> = self
+            .loops
+            .iter()
+            .map(|r| {
+                (
+                    r.row.to_string(),
+                    serde_json::json!({
+                        "judged_by": r.output,
+                        "held_out_free_run_rmse": [r.held_out_rmse.0, r.held_out_rmse.1],
+                        "kept": r.kept,
+                        "equation_error_fit": r.terms.iter().map(|(t, a, _)| (t.clone(), serde_json::json!(a))).collect::<serde_json::Map<_, _>>(),
+                        "note": r.note,
+                    }),
+                )
+            })
+            .collect();
+        serde_json::json!({
+            "horizon": self.options.horizon,
+            "stride": self.options.stride,
+            "horizon_s": crate::identify::loop_refine::HORIZON_S,
+            "stride_s": crate::identify::loop_refine::STRIDE_S,
+            "max_windows": self.options.max_windows,
+            "min_gain": self.options.min_gain,
+            "loops": loops,
+        })
+    }
+}
+
+/// [`fit`], then, with `refinement` = (integral-form data, options), the attitude loops refined
+/// by simulation error ([`refine`]; docs/identification.md "Loop refinement"): the model, its
+/// checks and its provenance (`loop_refinement`) are those of the refined ξ.
+pub fn fit_refined(
+    dataset: &Dataset,
+    options: &PdFitOptions,
+    refinement: Option<(&Dataset, &RefineOptions)>,
+    name: &str,
+    provenance: serde_json::Value,
+) -> Result<(PdFit, Option<PdRefinement>), PdFitError> {
     validate(options)?;
     if dataset.is_empty() {
         return Err(PdFitError::Empty);
@@ -579,18 +656,7 @@ pub fn fit(
         PdScale::Inertia(i) => fixed.extend([(14, i[0]), (15, i[1]), (16, i[2])]),
         PdScale::Gain { xi, value } => fixed.push((*xi, *value)),
     }
-    let xi11_max = (1.0 - options.xi11_margin) * m;
-    let inf = f64::INFINITY;
-    // A rate damping is at least I/τ with known inertias (PdFitOptions::max_rate_time_constant).
-    let min_damping = |k: usize| match (&options.scale, options.max_rate_time_constant) {
-        (PdScale::Inertia(i), Some(tau)) if (8..=10).contains(&k) => i[k - 8] / tau,
-        _ => 0.0,
-    };
-    let bounds = |k: usize| match k {
-        11 => (-xi11_max, xi11_max),
-        14..=16 => (options.min_inertia, inf),
-        _ => (min_damping(k), inf),
-    };
+    let bounds = |k: usize| bounds(options, k);
     let reweight = options.weighting == PdWeighting::Acceleration;
     let translation_group = Group {
         selected: &rows[..3],
@@ -634,7 +700,55 @@ pub fn fit(
         }
     }
 
-    let row_stats = residuals(&data, options, &xi);
+    let build = |xi: [f64; 16], record: Option<serde_json::Value>| -> Result<PdFit, PdFitError> {
+        assemble(
+            dataset,
+            &data,
+            options,
+            xi,
+            (translation.clone(), rotation.clone()),
+            name,
+            provenance.clone(),
+            record,
+        )
+    };
+    let Some((interval, refine_options)) = refinement else {
+        return Ok((build(xi, None)?, None));
+    };
+    let fitted = xi;
+    let lower: [f64; 16] = std::array::from_fn(|i| bounds(i + 1).0);
+    let skip = [1, 2].map(|j| options.unit_gain[j].then_some("the command channel was not excited (unit static gain)"));
+    let loops = refine::refine(&mut xi, &lower, interval, skip, refine_options);
+    let mut r = PdRefinement {
+        options: refine_options.clone(),
+        loops,
+        unrefined: None,
+    };
+    let record = r.record();
+    if r.loops.iter().any(|l| l.kept) {
+        let mut reverted = record.clone();
+        reverted["reverted"] = "the refined model failed a later check: the equation-error fit's xi".into();
+        r.unrefined = Some(Box::new(build(fitted, Some(reverted))?));
+    }
+    Ok((build(xi, Some(record))?, Some(r)))
+}
+
+/// The model file, the model and its checks at ξ (`loop_refinement`: the refinement's record for
+/// the provenance).
+#[allow(clippy::too_many_arguments)]
+fn assemble(
+    dataset: &Dataset,
+    data: &[Samples],
+    options: &PdFitOptions,
+    xi: [f64; 16],
+    (translation, rotation): (Subproblem, Subproblem),
+    name: &str,
+    provenance: serde_json::Value,
+    loop_refinement: Option<serde_json::Value>,
+) -> Result<PdFit, PdFitError> {
+    let samples: usize = data.iter().map(|s| s.x.len()).sum();
+    let (m, g) = (options.mass, options.gravity);
+    let row_stats = residuals(data, options, &xi);
     let mut file = PdFile {
         format: FORMAT.to_string(),
         kind: "pd".to_string(),
@@ -677,6 +791,9 @@ pub fn fit(
         "stable_at_hover": diagnostics.stable,
         "free_runs_bounded": diagnostics.free_runs_bounded(),
     });
+    if let Some(record) = loop_refinement {
+        file.provenance["loop_refinement"] = record;
+    }
     let mut model = model;
     model.provenance = file.provenance.clone();
     Ok(PdFit {

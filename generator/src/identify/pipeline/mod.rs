@@ -17,11 +17,12 @@
 
 mod delays;
 mod output;
+mod pd_fit;
 mod sindy_fit;
 
 use super::dataset::{build, DatasetOptions, Targets};
 use super::excitation::{self, ExcitationOptions};
-use super::pd::{self, PdFitOptions};
+use super::pd::PdFitOptions;
 use super::preprocess::{LowPass, SavGol};
 use super::response::{self, InputResponse};
 use super::sindy::{Criterion, LibraryKind};
@@ -75,7 +76,7 @@ pub struct IdentifyOptions {
     pub stale: StalePolicy,
     /// `None`: integral targets for SINDy, derivative targets for PD.
     pub targets: Option<Targets>,
-    /// SINDy: the loop refinement (`--refine-loops auto`).
+    /// The loop refinement (`--refine-loops auto`): SINDy's command loops, PD's attitude loops.
     pub refine_loops: bool,
     /// PD: mass, kg.
     pub mass: f64,
@@ -461,18 +462,10 @@ pub fn identify(logs: &[FlightLog], options: &IdentifyOptions, report: &dyn Repo
             }
         }
         Method::Pd => {
-            let pd_options = options.pd_options(&ex)?;
-            report.line(&format!(
-                "fitting the PD model on {} samples from {} log(s) ...",
-                dataset.len(),
-                logs.len()
-            ));
-            let fit = stage(report, "fitting the PD model", || {
-                pd::fit(&dataset, &pd_options, &options.name, provenance)
-            })
-            .map_err(|e| e.to_string())?;
-            report.line(&fit.diagnostics.summary());
-            serde_json::to_string_pretty(&fit.file).map_err(|e| e.to_string())?
+            let (text, fallback) =
+                pd_fit::fit(options, &logs, &dataset, savgol, response, &ex, dt, provenance, report)?;
+            unrefined = fallback.map(|t| t + "\n");
+            text
         }
     } + "\n";
     let refs: Vec<&FlightLog> = logs.iter().collect();

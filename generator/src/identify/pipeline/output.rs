@@ -112,7 +112,7 @@ impl Output<'_> {
         if let (Some(r), Some(text)) = (&checked, unrefined) {
             if !r.passed() {
                 report.line(&format!(
-                    "loop refinement: the refined model leaves the bounds within one MPC horizon ({} of {} trials); keeping the sparse fit's coefficients",
+                    "loop refinement: the refined model leaves the bounds within one MPC horizon ({} of {} trials); keeping the coefficients fitted before the refinement",
                     r.unbounded, r.trials
                 ));
                 (json, model) = self.finish(text)?;
