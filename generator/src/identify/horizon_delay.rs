@@ -261,6 +261,64 @@ pub fn split_logs(
     (train, test)
 }
 
+/// The log time the refinement works on at most, s: longer logs are refined on evenly spread
+/// excerpts of this much ([`excerpt_logs`]). The refinement estimates four delays; its cost is a
+/// refit and held-out free runs per candidate, proportional to the log. Five minutes of log
+/// (the benchmark's n5, the M100 runs 1–5) are used whole.
+pub const MAX_REFINE_S: f64 = 360.0;
+
+/// The length of one excerpt, s (long enough to split 80/20 into parts of three horizons).
+pub const EXCERPT_S: f64 = 60.0;
+
+/// `logs` cut to at most `max_s` seconds in total (rows × each segment's median period): the logs
+/// themselves when they are not longer; else every segment keeps its share (its length × the
+/// ratio, at least one row) in pieces of at most `excerpt_s`, evenly spread over it, each piece
+/// a segment of its own (the logs stay separate logs). Deterministic.
+pub fn excerpt_logs(logs: &[FlightLog], max_s: f64, excerpt_s: f64) -> Vec<FlightLog> {
+    let period = |seg: &Segment| -> f64 {
+        let steps: Vec<f64> = seg.t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+        crate::logs::median(&steps).unwrap_or(0.0)
+    };
+    let total: f64 = logs
+        .iter()
+        .flat_map(|l| &l.segments)
+        .map(|seg| seg.len() as f64 * period(seg))
+        .sum();
+    if !(total > max_s) || !(max_s > 0.0) {
+        return logs.to_vec();
+    }
+    let ratio = max_s / total;
+    logs.iter()
+        .map(|log| {
+            let mut segments = Vec::new();
+            for seg in &log.segments {
+                let n = seg.len();
+                let dt = period(seg);
+                let keep = ((n as f64 * ratio).round() as usize).clamp(1, n);
+                let piece = if dt > 0.0 {
+                    ((excerpt_s / dt).round() as usize).max(1)
+                } else {
+                    keep
+                };
+                let pieces = keep.div_ceil(piece).max(1);
+                let len = keep / pieces;
+                // Piece i centred at (i + ½) n / pieces.
+                for i in 0..pieces {
+                    let centre = ((2 * i + 1) * n) / (2 * pieces);
+                    let a = centre.saturating_sub(len / 2).min(n - len);
+                    let mut part = slice(seg, a, a + len);
+                    part.index = segments.len();
+                    segments.push(part);
+                }
+            }
+            FlightLog {
+                segments,
+                ..log.clone()
+            }
+        })
+        .collect()
+}
+
 fn slice(seg: &Segment, a: usize, b: usize) -> Segment {
     Segment {
         index: seg.index,
@@ -275,6 +333,67 @@ fn slice(seg: &Segment, a: usize, b: usize) -> Segment {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn log_of(segments: &[(usize, f64)]) -> FlightLog {
+        let segments: Vec<Segment> = segments
+            .iter()
+            .enumerate()
+            .map(|(index, &(n, dt))| Segment {
+                index,
+                t: (0..n).map(|k| 100.0 * index as f64 + k as f64 * dt).collect(),
+                x: (0..n).map(|k| [k as f64; 12]).collect(),
+                u: vec![[0.0; 4]; n],
+                battery_voltage: None,
+                first_line: 2,
+            })
+            .collect();
+        FlightLog {
+            source: "a.csv".into(),
+            metadata: Vec::new(),
+            segments,
+            report: crate::logs::QualityReport {
+                source: "a.csv".into(),
+                rows: 0,
+                metadata_rate_hz: None,
+                measured_period: None,
+                nominal_period: None,
+                segments: Vec::new(),
+            },
+        }
+    }
+
+    /// Logs within the cap are used whole; longer ones keep every segment's share in evenly
+    /// spread pieces of at most the excerpt's length, each its own segment, taken from the
+    /// original rows.
+    #[test]
+    fn long_logs_are_refined_on_evenly_spread_excerpts() {
+        let short = vec![log_of(&[(15000, 0.01), (15000, 0.01)])];
+        let same = excerpt_logs(&short, MAX_REFINE_S, EXCERPT_S);
+        assert_eq!(same[0].segments.len(), 2);
+        assert_eq!(same[0].segments[1].x, short[0].segments[1].x);
+        // 1 h at 100 Hz and 20 min at 50 Hz: 4800 s cut to 360 s (7.5 %).
+        let long = vec![log_of(&[(360_000, 0.01)]), log_of(&[(60_000, 0.02)])];
+        let cut = excerpt_logs(&long, MAX_REFINE_S, EXCERPT_S);
+        assert_eq!(cut.len(), 2);
+        let rows = |l: &FlightLog| l.segments.iter().map(|s| s.len()).sum::<usize>();
+        assert_eq!(rows(&cut[0]), 27_000); // 270 s: 5 pieces of 54 s
+        assert_eq!(cut[0].segments.len(), 5);
+        assert_eq!(rows(&cut[1]), 4_500); // 90 s: 2 pieces of 45 s
+        let total: f64 = rows(&cut[0]) as f64 * 0.01 + rows(&cut[1]) as f64 * 0.02;
+        assert!((total - MAX_REFINE_S).abs() < 1.0, "{total}");
+        for (i, seg) in cut[0].segments.iter().enumerate() {
+            assert_eq!(seg.index, i);
+            // Evenly spread: piece i is centred at (i + ½) / 5 of the log, rows as logged.
+            let first = seg.x[0][0] as usize;
+            let centre = first + seg.len() / 2;
+            assert!(
+                (centre as f64 - (i as f64 + 0.5) * 72_000.0).abs() <= 1.0,
+                "{i}: {centre}"
+            );
+            assert!(seg.x.iter().enumerate().all(|(k, x)| x[0] as usize == first + k));
+            assert_eq!(seg.first_line, 2 + first);
+        }
+    }
 
     #[test]
     fn scored_runs_start_every_five_hundredths_of_a_second() {
