@@ -179,13 +179,13 @@ struct Window {
 /// not involve the loop's own states at every sample the windows cover (see [`Row::new`]).
 struct Row {
     lp: Loop,
+    /// The row's terms in the refinement's order: first the `columns` that involve no loop state
+    /// (tabulated), then those that do (evaluated along each free run), each group in the row's
+    /// order; θ vectors of the methods below are in this order ([`Row::original`]).
     terms: Vec<Term>,
     theta0: Vec<f64>,
-    /// Per term: its column in [`Row::fixed`]'s tables, or `None` when it involves a loop state
-    /// (evaluated along each free run).
-    fixed_column: Vec<Option<usize>>,
-    /// The terms that involve a loop state, in order.
-    free: Vec<usize>,
+    /// The row's index of each term of `terms`.
+    order: Vec<usize>,
     /// Whether a free term also reads a variable other than the loop's states (then the other
     /// states are interpolated along the runs).
     mixed: bool,
@@ -195,7 +195,7 @@ struct Row {
     /// evaluates of every covered interval (the interval's start, middle and end):
     /// `[(3 slot + point) * columns + column]`.
     fixed: Vec<Vec<f64>>,
-    /// Columns of `fixed`.
+    /// Columns of `fixed`: the first `columns` terms.
     columns: usize,
 }
 
@@ -273,20 +273,19 @@ impl Row {
     fn new(lp: Loop, terms: Vec<Term>, theta0: Vec<f64>, data: &Dataset, windows: &[Window], h: usize) -> Self {
         let (row, output, angle) = (lp.row, lp.output, lp.has_angle());
         let loop_var = |i: usize| i == row || (angle && i == output);
-        let mut columns = 0;
-        let fixed_column: Vec<Option<usize>> = terms
+        let is_free: Vec<bool> = terms
             .iter()
-            .map(|t| {
-                let free = reads(t, row) || (angle && reads(t, output));
-                (!free).then(|| {
-                    columns += 1;
-                    columns - 1
-                })
-            })
+            .map(|t| reads(t, row) || (angle && reads(t, output)))
             .collect();
-        let free: Vec<usize> = (0..terms.len()).filter(|&i| fixed_column[i].is_none()).collect();
-        let mixed = free.iter().any(|&i| {
-            terms[i].factors.iter().any(|&(base, _)| match base {
+        let order: Vec<usize> = (0..terms.len())
+            .filter(|&i| !is_free[i])
+            .chain((0..terms.len()).filter(|&i| is_free[i]))
+            .collect();
+        let columns = is_free.iter().filter(|f| !**f).count();
+        let terms: Vec<Term> = order.iter().map(|&i| terms[i].clone()).collect();
+        let theta0: Vec<f64> = order.iter().map(|&i| theta0[i]).collect();
+        let mixed = terms[columns..].iter().any(|t| {
+            t.factors.iter().any(|&(base, _)| match base {
                 Base::Var(v) | Base::Sin(v) | Base::Cos(v) => !loop_var(v),
             })
         });
@@ -319,10 +318,8 @@ impl Row {
                     }
                     for frac in RK4_POINTS {
                         let v = interpolated(seg, k, frac);
-                        for (t, c) in terms.iter().zip(&fixed_column) {
-                            if c.is_some() {
-                                table.push(eval_term(t, &v));
-                            }
+                        for t in &terms[..columns] {
+                            table.push(eval_term(t, &v));
                         }
                     }
                 }
@@ -333,8 +330,7 @@ impl Row {
             lp,
             terms,
             theta0,
-            fixed_column,
-            free,
+            order,
             mixed,
             slot,
             fixed,
@@ -342,14 +338,25 @@ impl Row {
         }
     }
 
+    /// θ in the row's order (of the refinement's order, `theta`).
+    fn original(&self, theta: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; theta.len()];
+        for (&i, t) in self.order.iter().zip(theta) {
+            out[i] = *t;
+        }
+        out
+    }
+
+    /// θ in the refinement's order (of the row's order, `theta`).
+    #[cfg(test)]
+    fn internal(&self, theta: &[f64]) -> Vec<f64> {
+        self.order.iter().map(|&i| theta[i]).collect()
+    }
+
     /// Per segment and covered interval, the fixed terms' part of the rate at RK4's three points,
     /// Σ θ_i φ_i over the tabulated terms in order: `[3 slot + point]`.
     fn fixed_sums(&self, theta: &[f64]) -> Vec<Vec<f64>> {
-        let fixed_theta: Vec<f64> = theta
-            .iter()
-            .zip(&self.fixed_column)
-            .filter_map(|(t, c)| c.map(|_| *t))
-            .collect();
+        let fixed_theta = &theta[..self.columns];
         self.fixed
             .iter()
             .zip(&self.slot)
@@ -358,7 +365,7 @@ impl Row {
                 (0..points)
                     .map(|q| {
                         let phi = &table[q * self.columns..(q + 1) * self.columns];
-                        phi.iter().zip(&fixed_theta).fold(-0.0, |acc, (p, t)| acc + t * p)
+                        phi.iter().zip(fixed_theta).fold(-0.0, |acc, (p, t)| acc + t * p)
                     })
                     .collect()
             })
@@ -373,6 +380,7 @@ impl Row {
     /// [`Row::fixed_sums`], the terms that read a loop state evaluated along the run.
     fn residuals(&self, theta: &[f64], data: &Dataset, windows: &[Window], h: usize, out: &mut Vec<f64>) {
         out.clear();
+        let p = self.terms.len();
         let sums = self.fixed_sums(theta);
         let angle = self.lp.has_angle();
         let (row, output) = (self.lp.row, self.lp.output);
@@ -400,14 +408,14 @@ impl Row {
                         _ => [s[0] + dt * slopes[2][0], s[1] + dt * slopes[2][1]],
                     };
                     let mut f = sums[q + point];
-                    if !self.free.is_empty() {
+                    if self.columns < p {
                         let mut vr = v[point];
                         if angle {
                             vr[output] = at[0];
                         }
                         vr[row] = at[1];
-                        for &i in &self.free {
-                            f += theta[i] * eval_term(&self.terms[i], &vr);
+                        for (t, c) in self.terms[self.columns..].iter().zip(&theta[self.columns..]) {
+                            f += c * eval_term(t, &vr);
                         }
                     }
                     slopes[stage] = if angle { [at[1], f] } else { [0.0, f] };
@@ -451,16 +459,16 @@ impl Row {
         let sums = self.fixed_sums(theta);
         let angle = self.lp.has_angle();
         let (row, output) = (self.lp.row, self.lp.output);
+        let columns = self.columns;
         // JᵀJ's upper triangle (row-major, p × p) and Jᵀr, accumulated residual by residual.
         let mut upper = vec![0.0; p * p];
         let mut jr = vec![0.0; p];
-        let mut jrow = vec![0.0; p];
         // Sensitivities of the state (angle, rate), at a stage, and of the four stages' slopes
-        // (`[stage * p + j]`).
+        // (`[stage * p + j]`); φ of the terms evaluated along the run.
         let (mut sa, mut sr) = (vec![0.0; p], vec![0.0; p]);
         let (mut ata, mut atr) = (vec![0.0; p], vec![0.0; p]);
         let (mut ka, mut kr) = (vec![0.0; 4 * p], vec![0.0; 4 * p]);
-        let mut phi = vec![0.0; p];
+        let mut phi_free = vec![0.0; p - columns];
         for w in windows {
             let seg = &data.segments[w.seg];
             let (slots, sums, table) = (&self.slot[w.seg], &sums[w.seg], &self.fixed[w.seg]);
@@ -486,40 +494,48 @@ impl Row {
                     } else {
                         let sl = slopes[stage - 1];
                         let (pa, pr) = (&ka[(stage - 1) * p..stage * p], &kr[(stage - 1) * p..stage * p]);
-                        for j in 0..p {
-                            ata[j] = sa[j] + c * pa[j];
-                            atr[j] = sr[j] + c * pr[j];
+                        for ((a, s), k) in ata.iter_mut().zip(&sa).zip(pa) {
+                            *a = s + c * k;
+                        }
+                        for ((a, s), k) in atr.iter_mut().zip(&sr).zip(pr) {
+                            *a = s + c * k;
                         }
                         [s[0] + c * sl[0], s[1] + c * sl[1]]
                     };
-                    let columns = self.columns;
-                    for (i, column) in self.fixed_column.iter().enumerate() {
-                        if let Some(j) = column {
-                            phi[i] = table[(q + point) * columns + j];
-                        }
-                    }
                     let (mut f, mut f_rate, mut f_angle) = (sums[q + point], 0.0, 0.0);
-                    if !self.free.is_empty() {
+                    if columns < p {
                         let mut vr = v[point];
                         if angle {
                             vr[output] = at[0];
                         }
                         vr[row] = at[1];
-                        for &i in &self.free {
-                            let (value, d_rate, d_angle) = eval_term_grad(&self.terms[i], &vr, row, output);
-                            phi[i] = value;
-                            f += theta[i] * value;
-                            f_rate += theta[i] * d_rate;
+                        for ((t, th), ph) in self.terms[columns..]
+                            .iter()
+                            .zip(&theta[columns..])
+                            .zip(phi_free.iter_mut())
+                        {
+                            let (value, d_rate, d_angle) = eval_term_grad(t, &vr, row, output);
+                            *ph = value;
+                            f += th * value;
+                            f_rate += th * d_rate;
                             if angle {
-                                f_angle += theta[i] * d_angle;
+                                f_angle += th * d_angle;
                             }
                         }
                     }
                     slopes[stage] = if angle { [at[1], f] } else { [0.0, f] };
-                    let (na, nr) = (&mut ka[stage * p..(stage + 1) * p], &mut kr[stage * p..(stage + 1) * p]);
-                    for j in 0..p {
-                        na[j] = if angle { atr[j] } else { 0.0 };
-                        nr[j] = phi[j] + f_rate * atr[j] + f_angle * ata[j];
+                    // ∂k/∂θ_j: the angle's slope is the rate; the rate's is φ_j + f_rate S_rate + f_angle S_angle.
+                    let phi_fixed = &table[(q + point) * columns..(q + point + 1) * columns];
+                    let phi = phi_fixed.iter().chain(phi_free.iter());
+                    let nr = &mut kr[stage * p..(stage + 1) * p];
+                    for (((n, ph), r), a) in nr.iter_mut().zip(phi).zip(&atr).zip(&ata) {
+                        *n = ph + f_rate * r + f_angle * a;
+                    }
+                    let na = &mut ka[stage * p..(stage + 1) * p];
+                    if angle {
+                        na.copy_from_slice(&atr);
+                    } else {
+                        na.fill(0.0);
                     }
                 }
                 let [k1, k2, k3, k4] = slopes;
@@ -527,17 +543,22 @@ impl Row {
                     s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
                     s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
                 ];
-                for j in 0..p {
-                    let a = [ka[j], ka[p + j], ka[2 * p + j], ka[3 * p + j]];
-                    let b = [kr[j], kr[p + j], kr[2 * p + j], kr[3 * p + j]];
-                    sa[j] += dt / 6.0 * (a[0] + 2.0 * a[1] + 2.0 * a[2] + a[3]);
-                    sr[j] += dt / 6.0 * (b[0] + 2.0 * b[1] + 2.0 * b[2] + b[3]);
-                    jrow[j] = if angle { sa[j] } else { sr[j] };
+                let (k0, rest) = ka.split_at(p);
+                let (k1, rest) = rest.split_at(p);
+                let (k2, k3) = rest.split_at(p);
+                for ((((s, a), b), c), d) in sa.iter_mut().zip(k0).zip(k1).zip(k2).zip(k3) {
+                    *s += dt / 6.0 * (a + 2.0 * b + 2.0 * c + d);
                 }
+                let (k0, rest) = kr.split_at(p);
+                let (k1, rest) = rest.split_at(p);
+                let (k2, k3) = rest.split_at(p);
+                for ((((s, a), b), c), d) in sr.iter_mut().zip(k0).zip(k1).zip(k2).zip(k3) {
+                    *s += dt / 6.0 * (a + 2.0 * b + 2.0 * c + d);
+                }
+                let jrow: &[f64] = if angle { &sa } else { &sr };
                 let res = if angle { s[0] } else { s[1] } - seg.x_next[k][output];
                 r.push(res);
-                for i in 0..p {
-                    let ji = jrow[i];
+                for (i, &ji) in jrow.iter().enumerate() {
                     jr[i] += ji * res;
                     for (u, jk) in upper[i * p + i..(i + 1) * p].iter_mut().zip(&jrow[i..]) {
                         *u += ji * jk;
@@ -767,6 +788,7 @@ pub fn refine(coefficients: &mut [Coefficient], data: &Dataset, options: &Refine
         } else {
             let theta = row.refine(data, &windows, options);
             if theta.iter().all(|t| t.is_finite()) {
+                let theta = row.original(&theta);
                 for ((&i, t), entry) in idx.iter().zip(&theta).zip(report.terms.iter_mut()) {
                     coefficients[i].coefficient = *t;
                     entry.2 = *t;
@@ -934,7 +956,7 @@ mod tests {
             .collect();
         for theta in [&theta0, &other] {
             let mut got = Vec::new();
-            row.residuals(theta, &data, &windows, h, &mut got);
+            row.residuals(&row.internal(theta), &data, &windows, h, &mut got);
             let want = plain(theta);
             assert_eq!(got.len(), want.len());
             let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -992,6 +1014,7 @@ mod tests {
                 .flat_map(|seg| (0..250).step_by(11).map(move |start| Window { seg, start }))
                 .collect();
             let row = Row::new(lp, terms, theta.clone(), &data, &windows, h);
+            let theta = row.internal(&theta);
             let p = theta.len();
             let (mut r, mut jtj, mut jtr) = (Vec::new(), DMatrix::zeros(0, 0), DVector::zeros(0));
             row.residuals_jacobian(&theta, &data, &windows, h, &mut r, &mut jtj, &mut jtr);
