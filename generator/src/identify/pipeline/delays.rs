@@ -126,6 +126,7 @@ fn refine_delays(
 ) -> Option<horizon_delay::Refinement> {
     let refine = RefineOptions {
         fixed: ex.silent(),
+        confirm: options.method == Method::Sindy && options.optimizer == OptimizerChoice::Stlsq,
         ..RefineOptions::default()
     };
     let min_rows = refine.min_rows(dt);
@@ -168,12 +169,13 @@ fn refine_delays(
     // start's response; a candidate refits only the rows its changed channels drive, on the
     // terms the start's fit selected ([`refit_rows`]); the other rows are the start's.
     let stride = horizon_delay::score_stride(dt);
-    let row_refit = options.method == Method::Sindy && options.optimizer == OptimizerChoice::Stlsq;
+    let row_refit = refine.confirm;
     let mut starts: Vec<Option<(crate::model::SindyFile, InputResponse)>> = vec![None; splits.len()];
-    let mut split_rmse = |i: usize, r: &InputResponse| -> Option<f64> {
+    let mut split_rmse = |i: usize, r: &InputResponse, full: bool| -> Option<f64> {
         let (train, test) = &splits[i];
         let model = if row_refit {
             let file = match &starts[i] {
+                Some(_) if full => candidate_sindy(options, train, r, savgol, targets, ex)?,
                 None => {
                     let file = candidate_sindy(options, train, r, savgol, targets, ex)?;
                     starts[i] = Some((file.clone(), *r));
@@ -197,8 +199,10 @@ fn refine_delays(
     };
     // The worse split's RMSE relative to the start's (the first call scores the start).
     let mut reference: Option<Vec<f64>> = None;
-    let mut score = |r: &InputResponse| -> Option<f64> {
-        let rmse: Vec<f64> = (0..splits.len()).map(|i| split_rmse(i, r)).collect::<Option<_>>()?;
+    let mut score = |r: &InputResponse, full: bool| -> Option<f64> {
+        let rmse: Vec<f64> = (0..splits.len())
+            .map(|i| split_rmse(i, r, full))
+            .collect::<Option<_>>()?;
         let base = reference.get_or_insert_with(|| rmse.clone());
         rmse.iter().zip(base.iter()).map(|(a, b)| a / b).reduce(f64::max)
     };
@@ -211,7 +215,7 @@ fn refine_delays(
                 "  delays refined over the horizon (model refitted on {:.0} % of every segment{}, free runs of {} samples starting {} sample(s) apart on the rest, its first and its last part in turn; score: the worse part's overall RMSE relative to the one-step delays'): {:.3} -> {:.3}",
                 100.0 * refine.train_share,
                 if row_refit {
-                    " — a candidate refits only the rows its channel drives, on the terms of the fit with the one-step delays"
+                    " — a candidate refits only the rows its channel drives, on the terms of the fit with the one-step delays; a channel's two best, if at least half the required gain better, are confirmed by the whole refit"
                 } else {
                     ""
                 },
@@ -222,7 +226,7 @@ fn refine_delays(
             ));
             for c in &r.channels {
                 report.line(&format!(
-                    "  {:<10} delay {:.3} s -> {:.3} s (tried {})",
+                    "  {:<10} delay {:.3} s -> {:.3} s (tried {}){}",
                     c.input,
                     c.one_step,
                     c.delay,
@@ -230,7 +234,19 @@ fn refine_delays(
                         .iter()
                         .map(|(d, s)| format!("{d:.3}: {s:.4}"))
                         .collect::<Vec<_>>()
-                        .join(", ")
+                        .join(", "),
+                    if c.confirmed.is_empty() {
+                        String::new()
+                    } else {
+                        format!(
+                            "; by the whole refit {}",
+                            c.confirmed
+                                .iter()
+                                .map(|(d, s)| format!("{d:.3}: {s:.4}"))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )
+                    }
                 ));
             }
         }
@@ -442,6 +458,7 @@ fn refinement_json(r: &horizon_delay::Refinement, options: &RefineOptions) -> se
                     "one_step": round_s(c.one_step),
                     "delay": round_s(c.delay),
                     "scores": c.scores.iter().map(|(d, s)| serde_json::json!([round_s(*d), if s.is_finite() { serde_json::json!(s) } else { serde_json::Value::Null }])).collect::<Vec<_>>(),
+                    "confirmed_by_whole_refit": c.confirmed.iter().map(|(d, s)| serde_json::json!([round_s(*d), if s.is_finite() { serde_json::json!(s) } else { serde_json::Value::Null }])).collect::<Vec<_>>(),
                 }),
             )
         })
