@@ -323,7 +323,8 @@ pub fn excerpt_logs(logs: &[FlightLog], max_s: f64, excerpt_s: f64) -> Vec<Fligh
         .flat_map(|l| &l.segments)
         .map(|seg| seg.len() as f64 * period(seg))
         .sum();
-    if !(total > max_s) || !(max_s > 0.0) {
+    let longer = total > max_s && max_s > 0.0;
+    if !longer {
         return logs.to_vec();
     }
     let ratio = max_s / total;

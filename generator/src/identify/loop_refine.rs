@@ -430,8 +430,8 @@ impl Row {
         }
     }
 
-    /// The free-run residuals at `theta` (into `r`, as [`Row::residuals`]) with the Gauss–Newton
-    /// matrices of their Jacobian J = ∂r/∂θ: `jtj` = JᵀJ and `jtr` = Jᵀr.
+    /// The free-run residuals at `theta` (into `r`, as [`Row::residuals`]) and the Gauss–Newton
+    /// matrices of their Jacobian J = ∂r/∂θ: (JᵀJ, Jᵀr).
     ///
     /// J is exact for the discrete runs: forward sensitivities S = ∂(output, rate)/∂θ carried
     /// through every RK4 stage alongside the state. The rate ṙ = Σ θ_i φ_i(v) is linear in θ, so
@@ -446,15 +446,13 @@ impl Row {
         windows: &[Window],
         h: usize,
         r: &mut Vec<f64>,
-        jtj: &mut DMatrix<f64>,
-        jtr: &mut DVector<f64>,
-    ) {
+    ) -> (DMatrix<f64>, DVector<f64>) {
         r.clear();
         let p = self.terms.len();
-        *jtj = DMatrix::zeros(p, p);
-        *jtr = DVector::zeros(p);
+        let mut jtj = DMatrix::zeros(p, p);
+        let mut jtr = DVector::zeros(p);
         if p == 0 {
-            return;
+            return (jtj, jtr);
         }
         let sums = self.fixed_sums(theta);
         let angle = self.lp.has_angle();
@@ -573,6 +571,7 @@ impl Row {
                 jtj[(k, i)] = upper[i * p + k];
             }
         }
+        (jtj, jtr)
     }
 
     fn cost(&self, theta: &[f64], data: &Dataset, windows: &[Window], h: usize, buf: &mut Vec<f64>) -> f64 {
@@ -596,8 +595,6 @@ impl Row {
             return theta;
         }
         let mut r = Vec::new();
-        let (mut a, mut g) = (DMatrix::zeros(p, p), DVector::zeros(p));
-        let (mut at, mut gt) = (DMatrix::zeros(p, p), DVector::zeros(p));
         let sse = |r: &[f64]| -> f64 {
             let c: f64 = r.iter().map(|r| r * r).sum();
             if c.is_finite() {
@@ -606,7 +603,7 @@ impl Row {
                 f64::INFINITY
             }
         };
-        self.residuals_jacobian(&theta, data, windows, h, &mut r, &mut a, &mut g);
+        let (mut a, mut g) = self.residuals_jacobian(&theta, data, windows, h, &mut r);
         let mut cost = sse(&r);
         if !cost.is_finite() {
             return theta;
@@ -636,14 +633,13 @@ impl Row {
                     continue;
                 };
                 let trial: Vec<f64> = theta.iter().zip(delta.iter()).map(|(t, d)| t + d).collect();
-                self.residuals_jacobian(&trial, data, windows, h, &mut r, &mut at, &mut gt);
+                let (at, gt) = self.residuals_jacobian(&trial, data, windows, h, &mut r);
                 let c = sse(&r);
                 if c < cost {
                     let fall = (cost - c) / cost;
                     theta = trial;
                     cost = c;
-                    std::mem::swap(&mut a, &mut at);
-                    std::mem::swap(&mut g, &mut gt);
+                    (a, g) = (at, gt);
                     lambda = (lambda / 3.0).max(1e-9);
                     accepted = true;
                     if fall < 1e-7 {
@@ -1016,8 +1012,8 @@ mod tests {
             let row = Row::new(lp, terms, theta.clone(), &data, &windows, h);
             let theta = row.internal(&theta);
             let p = theta.len();
-            let (mut r, mut jtj, mut jtr) = (Vec::new(), DMatrix::zeros(0, 0), DVector::zeros(0));
-            row.residuals_jacobian(&theta, &data, &windows, h, &mut r, &mut jtj, &mut jtr);
+            let mut r = Vec::new();
+            let (jtj, jtr) = row.residuals_jacobian(&theta, &data, &windows, h, &mut r);
             let mut plain = Vec::new();
             row.residuals(&theta, &data, &windows, h, &mut plain);
             assert_eq!(r.len(), plain.len());
