@@ -23,7 +23,8 @@
 //! where every window starts at a logged sample, runs the loop's own states freely for H samples
 //! (one MPC horizon) with RK4 on the interval inputs the data set pairs with each interval (the
 //! identified delays and lags included) and every other state linearly interpolated from the log.
-//! Levenberg–Marquardt from the sparse fit's coefficients, with forward-difference Jacobians.
+//! Levenberg–Marquardt from the sparse fit's coefficients, with the exact Jacobian of the runs
+//! (forward sensitivities carried through the RK4 steps: the rate is linear in θ).
 //!
 //! **When it is kept.** Cross-validated, like the input response: with 3 or more logs each log is
 //! held out in turn (else 5 contiguous blocks of every segment), the row is refined on the rest
@@ -73,9 +74,11 @@ pub struct RefineOptions {
     pub horizon: usize,
     /// Samples between window starts (at least; see `max_windows`).
     pub stride: usize,
-    /// Windows at most: on long logs the stride grows so that there are no more (free runs of
-    /// one horizon that start 3 samples apart are nearly the same run; a 20-minute log would
-    /// otherwise cost minutes).
+    /// Windows at most: on long logs the stride grows so that there are no more, spread evenly
+    /// over every segment (free runs of one horizon that start 3 samples apart are nearly the
+    /// same run; the stage estimates a handful of coefficients per loop, and its cost is the
+    /// windows' runs: bounded whatever the log's length). 2000 windows of the default stride
+    /// 0.1 s are 200 s of run starts.
     pub max_windows: usize,
     /// Levenberg–Marquardt iterations at most.
     pub max_iter: usize,
@@ -173,19 +176,26 @@ struct Window {
 }
 
 /// The loop's row as parsed terms and their coefficients, and the values of the terms that do
-/// not involve the loop's own states at every sample of the data (see [`Row::new`]).
+/// not involve the loop's own states at every sample the windows cover (see [`Row::new`]).
 struct Row {
     lp: Loop,
+    /// The row's terms in the refinement's order: first the `columns` that involve no loop state
+    /// (tabulated), then those that do (evaluated along each free run), each group in the row's
+    /// order; θ vectors of the methods below are in this order ([`Row::original`]).
     terms: Vec<Term>,
     theta0: Vec<f64>,
-    /// Per term: its column in [`Row::fixed`]'s tables, or `None` when it involves a loop state
-    /// (evaluated along each free run).
-    fixed_column: Vec<Option<usize>>,
-    /// Per segment of the data, the terms that do not involve the loop's states at the three
-    /// points RK4 evaluates of every interval k (the interval's start, middle and end):
-    /// `[(3 k + point) * columns + column]`; empty for a segment no window runs on.
+    /// The row's index of each term of `terms`.
+    order: Vec<usize>,
+    /// Whether a free term also reads a variable other than the loop's states (then the other
+    /// states are interpolated along the runs).
+    mixed: bool,
+    /// Per segment of the data, sample k → its slot in `fixed` (`u32::MAX`: no window covers k).
+    slot: Vec<Vec<u32>>,
+    /// Per segment, the terms that do not involve the loop's states at the three points RK4
+    /// evaluates of every covered interval (the interval's start, middle and end):
+    /// `[(3 slot + point) * columns + column]`.
     fixed: Vec<Vec<f64>>,
-    /// Columns of `fixed`.
+    /// Columns of `fixed`: the first `columns` terms.
     columns: usize,
 }
 
@@ -205,6 +215,35 @@ fn eval_term(term: &Term, v: &[f64; 16]) -> f64 {
         r *= if power == 1 { b } else { b.powi(power as i32) };
     }
     r
+}
+
+/// A term's value at `v` (as [`eval_term`], bit for bit) and its partial derivatives by the
+/// variables `a` and `b` (product rule over the factors; `b` may equal `a`).
+fn eval_term_grad(term: &Term, v: &[f64; 16], a: usize, b: usize) -> (f64, f64, f64) {
+    let (mut r, mut da, mut db) = (1.0, 0.0, 0.0);
+    for &(base, power) in &term.factors {
+        let (i, x, dx) = match base {
+            Base::Var(i) => (i, v[i], 1.0),
+            Base::Sin(i) => (i, v[i].sin(), v[i].cos()),
+            Base::Cos(i) => (i, v[i].cos(), -v[i].sin()),
+        };
+        let (g, dg) = if power == 1 {
+            (x, dx)
+        } else {
+            (x.powi(power as i32), power as f64 * x.powi(power as i32 - 1) * dx)
+        };
+        // d(r g) = dr g + r dg, dg only by the factor's own variable.
+        da *= g;
+        db *= g;
+        if i == a {
+            da += r * dg;
+        }
+        if i == b {
+            db += r * dg;
+        }
+        r *= g;
+    }
+    (r, da, db)
 }
 
 /// Whether `term` reads the variable `var`.
@@ -229,35 +268,58 @@ fn interpolated(seg: &SegmentData, k: usize, frac: f64) -> [f64; 16] {
 impl Row {
     /// The row of loop `lp`; the terms that involve neither the row's state nor (with an angle)
     /// the judged state are the same on every free run through a sample, so they are evaluated
-    /// once per sample of `data` here instead of on every run (the refinement runs each window
-    /// p + 1 times per Levenberg–Marquardt iteration).
-    fn new(lp: Loop, terms: Vec<Term>, theta0: Vec<f64>, data: &Dataset, h: usize) -> Self {
-        let mut columns = 0;
-        let fixed_column: Vec<Option<usize>> = terms
+    /// once per sample the `windows` (of `h` samples) cover here, instead of on every run (the
+    /// refinement runs each window twice per Levenberg–Marquardt iteration).
+    fn new(lp: Loop, terms: Vec<Term>, theta0: Vec<f64>, data: &Dataset, windows: &[Window], h: usize) -> Self {
+        let (row, output, angle) = (lp.row, lp.output, lp.has_angle());
+        let loop_var = |i: usize| i == row || (angle && i == output);
+        let is_free: Vec<bool> = terms
             .iter()
-            .map(|t| {
-                let free = reads(t, lp.row) || (lp.has_angle() && reads(t, lp.output));
-                (!free).then(|| {
-                    columns += 1;
-                    columns - 1
-                })
-            })
+            .map(|t| reads(t, row) || (angle && reads(t, output)))
             .collect();
+        let order: Vec<usize> = (0..terms.len())
+            .filter(|&i| !is_free[i])
+            .chain((0..terms.len()).filter(|&i| is_free[i]))
+            .collect();
+        let columns = is_free.iter().filter(|f| !**f).count();
+        let terms: Vec<Term> = order.iter().map(|&i| terms[i].clone()).collect();
+        let theta0: Vec<f64> = order.iter().map(|&i| theta0[i]).collect();
+        let mixed = terms[columns..].iter().any(|t| {
+            t.factors.iter().any(|&(base, _)| match base {
+                Base::Var(v) | Base::Sin(v) | Base::Cos(v) => !loop_var(v),
+            })
+        });
+        let mut slot: Vec<Vec<u32>> = data.segments.iter().map(|_| Vec::new()).collect();
+        for w in windows {
+            let n = data.segments[w.seg].x.len();
+            let s = &mut slot[w.seg];
+            if s.is_empty() {
+                *s = vec![u32::MAX; n];
+            }
+            for k in w.start..(w.start + h).min(n) {
+                s[k] = 0;
+            }
+        }
         let fixed = data
             .segments
             .iter()
-            .map(|seg| {
-                if columns == 0 || seg.x_next.len() != seg.x.len() || seg.x.len() < h {
-                    return Vec::new();
-                }
-                let mut table = Vec::with_capacity(seg.x.len() * 3 * columns);
-                for k in 0..seg.x.len() {
+            .zip(slot.iter_mut())
+            .map(|(seg, slots)| {
+                let mut table = Vec::new();
+                let mut next = 0u32;
+                for (k, sl) in slots.iter_mut().enumerate() {
+                    if *sl == u32::MAX {
+                        continue;
+                    }
+                    *sl = next;
+                    next += 1;
+                    if columns == 0 {
+                        continue;
+                    }
                     for frac in RK4_POINTS {
                         let v = interpolated(seg, k, frac);
-                        for (t, c) in terms.iter().zip(&fixed_column) {
-                            if c.is_some() {
-                                table.push(eval_term(t, &v));
-                            }
+                        for t in &terms[..columns] {
+                            table.push(eval_term(t, &v));
                         }
                     }
                 }
@@ -268,115 +330,248 @@ impl Row {
             lp,
             terms,
             theta0,
-            fixed_column,
+            order,
+            mixed,
+            slot,
             fixed,
             columns,
         }
     }
 
-    /// The free-run residuals y_sim − y_log of every window, appended to `out`.
-    fn residuals(&self, theta: &[f64], data: &Dataset, windows: &[Window], h: usize, out: &mut Vec<f64>) {
-        self.residuals_of(&[theta], data, windows, h, std::slice::from_mut(out));
+    /// θ in the row's order (of the refinement's order, `theta`).
+    fn original(&self, theta: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; theta.len()];
+        for (&i, t) in self.order.iter().zip(theta) {
+            out[i] = *t;
+        }
+        out
     }
 
-    /// [`Row::residuals`] of several coefficient vectors at once (`outs[i]` those of `thetas[i]`).
+    /// θ in the refinement's order (of the row's order, `theta`).
+    #[cfg(test)]
+    fn internal(&self, theta: &[f64]) -> Vec<f64> {
+        self.order.iter().map(|&i| theta[i]).collect()
+    }
+
+    /// Per segment and covered interval, the fixed terms' part of the rate at RK4's three points,
+    /// Σ θ_i φ_i over the tabulated terms in order: `[3 slot + point]`.
+    fn fixed_sums(&self, theta: &[f64]) -> Vec<Vec<f64>> {
+        let fixed_theta = &theta[..self.columns];
+        self.fixed
+            .iter()
+            .zip(&self.slot)
+            .map(|(table, slots)| {
+                let points = 3 * slots.iter().filter(|s| **s != u32::MAX).count();
+                (0..points)
+                    .map(|q| {
+                        let phi = &table[q * self.columns..(q + 1) * self.columns];
+                        phi.iter().zip(fixed_theta).fold(-0.0, |acc, (p, t)| acc + t * p)
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The free-run residuals y_sim − y_log of every window, into `out`.
     ///
     /// Every free run is one RK4 step per interval k of the loop's (output, rate), ṙ = Σ θ_i φ_i(v)
     /// at the interval's start, middle (twice) and end, v the other states linearly interpolated
-    /// between x_k and x_{k+1} and the interval's inputs. The runs of one window advance side by
-    /// side: at each stage the sums of all runs are formed term by term (the runs innermost, so
-    /// that the processor overlaps or vectorises them), the fixed terms read once from the
-    /// table. Each run's sum is the same products added in the same order as Σ over its terms
-    /// alone, so every run is bit for bit what it would be on its own.
-    fn residuals_of(&self, thetas: &[&[f64]], data: &Dataset, windows: &[Window], h: usize, outs: &mut [Vec<f64>]) {
-        for out in outs.iter_mut() {
-            out.clear();
-        }
-        let n = thetas.len();
+    /// between x_k and x_{k+1} and the interval's inputs: the tabulated terms' sum read from
+    /// [`Row::fixed_sums`], the terms that read a loop state evaluated along the run.
+    fn residuals(&self, theta: &[f64], data: &Dataset, windows: &[Window], h: usize, out: &mut Vec<f64>) {
+        out.clear();
         let p = self.terms.len();
-        if n == 0 {
-            return;
-        }
+        let sums = self.fixed_sums(theta);
         let angle = self.lp.has_angle();
         let (row, output) = (self.lp.row, self.lp.output);
-        // Whether a term mixes a loop state with another variable (else no interpolation).
-        let mixed = self.fixed_column.iter().zip(&self.terms).any(|(c, t)| {
-            c.is_none()
-                && t.factors.iter().any(|&(base, _)| match base {
-                    Base::Var(i) | Base::Sin(i) | Base::Cos(i) => i != row && !(angle && i == output),
-                })
-        });
-        let free_terms = self.fixed_column.iter().any(|c| c.is_none());
-        // coef[i n + r]: term i's coefficient in run r.
-        let coef: Vec<f64> = (0..p).flat_map(|i| thetas.iter().map(move |t| t[i])).collect();
-        let mut s = vec![[0.0; 2]; n];
-        let mut at = vec![[0.0; 2]; n];
-        let mut slopes = vec![[[0.0; 2]; 4]; n];
-        let mut acc = vec![0.0; n];
-        let mut vs = vec![[0.0; 16]; n];
         for w in windows {
             let seg = &data.segments[w.seg];
-            let table = &self.fixed[w.seg];
+            let (slots, sums) = (&self.slot[w.seg], &sums[w.seg]);
             let dt = seg.dt;
             let x = &seg.x[w.start];
-            s.fill([x[output], x[row]]);
+            let mut s = [x[output], x[row]];
             for k in w.start..w.start + h {
-                let v = if mixed {
+                let v = if self.mixed {
                     RK4_POINTS.map(|frac| interpolated(seg, k, frac))
                 } else {
                     [[0.0; 16]; 3]
                 };
+                let q = 3 * slots[k] as usize;
+                let mut slopes = [[0.0; 2]; 4];
                 for (stage, point) in [0usize, 1, 1, 2].into_iter().enumerate() {
-                    for ((a, s), sl) in at.iter_mut().zip(&s).zip(&slopes) {
-                        *a = match stage {
-                            0 => *s,
-                            1 => [s[0] + 0.5 * dt * sl[0][0], s[1] + 0.5 * dt * sl[0][1]],
-                            2 => [s[0] + 0.5 * dt * sl[1][0], s[1] + 0.5 * dt * sl[1][1]],
-                            _ => [s[0] + dt * sl[2][0], s[1] + dt * sl[2][1]],
-                        };
+                    let at = match stage {
+                        0 => s,
+                        1 | 2 => [
+                            s[0] + 0.5 * dt * slopes[stage - 1][0],
+                            s[1] + 0.5 * dt * slopes[stage - 1][1],
+                        ],
+                        _ => [s[0] + dt * slopes[2][0], s[1] + dt * slopes[2][1]],
+                    };
+                    let mut f = sums[q + point];
+                    if self.columns < p {
+                        let mut vr = v[point];
+                        if angle {
+                            vr[output] = at[0];
+                        }
+                        vr[row] = at[1];
+                        for (t, c) in self.terms[self.columns..].iter().zip(&theta[self.columns..]) {
+                            f += c * eval_term(t, &vr);
+                        }
                     }
-                    if free_terms {
-                        for (vr, a) in vs.iter_mut().zip(&at) {
-                            *vr = v[point];
+                    slopes[stage] = if angle { [at[1], f] } else { [0.0, f] };
+                }
+                let [k1, k2, k3, k4] = slopes;
+                s = [
+                    s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+                    s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+                ];
+                out.push(if angle { s[0] } else { s[1] } - seg.x_next[k][output]);
+            }
+        }
+    }
+
+    /// The free-run residuals at `theta` (into `r`, as [`Row::residuals`]) and the Gauss–Newton
+    /// matrices of their Jacobian J = ∂r/∂θ: (JᵀJ, Jᵀr).
+    ///
+    /// J is exact for the discrete runs: forward sensitivities S = ∂(output, rate)/∂θ carried
+    /// through every RK4 stage alongside the state. The rate ṙ = Σ θ_i φ_i(v) is linear in θ, so
+    /// a stage's slope sensitivity is ∂k/∂θ_j = φ_j + (∂f/∂rate) S_rate,j + (∂f/∂angle) S_angle,j
+    /// (the angle's slope is the rate: its sensitivity is S_rate), ∂f/∂· = Σ θ_i ∂φ_i/∂· over the
+    /// terms that read the loop's states (the tabulated ones do not). One run per call instead of
+    /// the p + 1 of a forward-difference Jacobian, and without its truncation error.
+    fn residuals_jacobian(
+        &self,
+        theta: &[f64],
+        data: &Dataset,
+        windows: &[Window],
+        h: usize,
+        r: &mut Vec<f64>,
+    ) -> (DMatrix<f64>, DVector<f64>) {
+        r.clear();
+        let p = self.terms.len();
+        let mut jtj = DMatrix::zeros(p, p);
+        let mut jtr = DVector::zeros(p);
+        if p == 0 {
+            return (jtj, jtr);
+        }
+        let sums = self.fixed_sums(theta);
+        let angle = self.lp.has_angle();
+        let (row, output) = (self.lp.row, self.lp.output);
+        let columns = self.columns;
+        // JᵀJ's upper triangle (row-major, p × p) and Jᵀr, accumulated residual by residual.
+        let mut upper = vec![0.0; p * p];
+        let mut jr = vec![0.0; p];
+        // Sensitivities of the state (angle, rate), at a stage, and of the four stages' slopes
+        // (`[stage * p + j]`); φ of the terms evaluated along the run.
+        let (mut sa, mut sr) = (vec![0.0; p], vec![0.0; p]);
+        let (mut ata, mut atr) = (vec![0.0; p], vec![0.0; p]);
+        let (mut ka, mut kr) = (vec![0.0; 4 * p], vec![0.0; 4 * p]);
+        let mut phi_free = vec![0.0; p - columns];
+        for w in windows {
+            let seg = &data.segments[w.seg];
+            let (slots, sums, table) = (&self.slot[w.seg], &sums[w.seg], &self.fixed[w.seg]);
+            let dt = seg.dt;
+            let x = &seg.x[w.start];
+            let mut s = [x[output], x[row]];
+            sa.fill(0.0);
+            sr.fill(0.0);
+            for k in w.start..w.start + h {
+                let v = if self.mixed {
+                    RK4_POINTS.map(|frac| interpolated(seg, k, frac))
+                } else {
+                    [[0.0; 16]; 3]
+                };
+                let q = 3 * slots[k] as usize;
+                let mut slopes = [[0.0; 2]; 4];
+                for (stage, point) in [0usize, 1, 1, 2].into_iter().enumerate() {
+                    let c = if stage == 3 { dt } else { 0.5 * dt };
+                    let at = if stage == 0 {
+                        ata.copy_from_slice(&sa);
+                        atr.copy_from_slice(&sr);
+                        s
+                    } else {
+                        let sl = slopes[stage - 1];
+                        let (pa, pr) = (&ka[(stage - 1) * p..stage * p], &kr[(stage - 1) * p..stage * p]);
+                        for ((a, s), k) in ata.iter_mut().zip(&sa).zip(pa) {
+                            *a = s + c * k;
+                        }
+                        for ((a, s), k) in atr.iter_mut().zip(&sr).zip(pr) {
+                            *a = s + c * k;
+                        }
+                        [s[0] + c * sl[0], s[1] + c * sl[1]]
+                    };
+                    let (mut f, mut f_rate, mut f_angle) = (sums[q + point], 0.0, 0.0);
+                    if columns < p {
+                        let mut vr = v[point];
+                        if angle {
+                            vr[output] = at[0];
+                        }
+                        vr[row] = at[1];
+                        for ((t, th), ph) in self.terms[columns..]
+                            .iter()
+                            .zip(&theta[columns..])
+                            .zip(phi_free.iter_mut())
+                        {
+                            let (value, d_rate, d_angle) = eval_term_grad(t, &vr, row, output);
+                            *ph = value;
+                            f += th * value;
+                            f_rate += th * d_rate;
                             if angle {
-                                vr[output] = a[0];
-                            }
-                            vr[row] = a[1];
-                        }
-                    }
-                    let fixed = &table[(3 * k + point) * self.columns..(3 * k + point + 1) * self.columns];
-                    acc.fill(-0.0);
-                    for (i, (term, column)) in self.terms.iter().zip(&self.fixed_column).enumerate() {
-                        let c = &coef[i * n..(i + 1) * n];
-                        match column {
-                            Some(j) => {
-                                let phi = fixed[*j];
-                                for (a, c) in acc.iter_mut().zip(c) {
-                                    *a += c * phi;
-                                }
-                            }
-                            None => {
-                                for ((a, c), vr) in acc.iter_mut().zip(c).zip(&vs) {
-                                    *a += c * eval_term(term, vr);
-                                }
+                                f_angle += th * d_angle;
                             }
                         }
                     }
-                    for ((sl, a), rate) in slopes.iter_mut().zip(&at).zip(&acc) {
-                        sl[stage] = if angle { [a[1], *rate] } else { [0.0, *rate] };
+                    slopes[stage] = if angle { [at[1], f] } else { [0.0, f] };
+                    // ∂k/∂θ_j: the angle's slope is the rate; the rate's is φ_j + f_rate S_rate + f_angle S_angle.
+                    let phi_fixed = &table[(q + point) * columns..(q + point + 1) * columns];
+                    let phi = phi_fixed.iter().chain(phi_free.iter());
+                    let nr = &mut kr[stage * p..(stage + 1) * p];
+                    for (((n, ph), r), a) in nr.iter_mut().zip(phi).zip(&atr).zip(&ata) {
+                        *n = ph + f_rate * r + f_angle * a;
+                    }
+                    let na = &mut ka[stage * p..(stage + 1) * p];
+                    if angle {
+                        na.copy_from_slice(&atr);
+                    } else {
+                        na.fill(0.0);
                     }
                 }
-                let y_log = seg.x_next[k][output];
-                for ((s, sl), out) in s.iter_mut().zip(&slopes).zip(outs.iter_mut()) {
-                    let (k1, k2, k3, k4) = (sl[0], sl[1], sl[2], sl[3]);
-                    *s = [
-                        s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
-                        s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
-                    ];
-                    out.push(if angle { s[0] } else { s[1] } - y_log);
+                let [k1, k2, k3, k4] = slopes;
+                s = [
+                    s[0] + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+                    s[1] + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+                ];
+                let (k0, rest) = ka.split_at(p);
+                let (k1, rest) = rest.split_at(p);
+                let (k2, k3) = rest.split_at(p);
+                for ((((s, a), b), c), d) in sa.iter_mut().zip(k0).zip(k1).zip(k2).zip(k3) {
+                    *s += dt / 6.0 * (a + 2.0 * b + 2.0 * c + d);
+                }
+                let (k0, rest) = kr.split_at(p);
+                let (k1, rest) = rest.split_at(p);
+                let (k2, k3) = rest.split_at(p);
+                for ((((s, a), b), c), d) in sr.iter_mut().zip(k0).zip(k1).zip(k2).zip(k3) {
+                    *s += dt / 6.0 * (a + 2.0 * b + 2.0 * c + d);
+                }
+                let jrow: &[f64] = if angle { &sa } else { &sr };
+                let res = if angle { s[0] } else { s[1] } - seg.x_next[k][output];
+                r.push(res);
+                for (i, &ji) in jrow.iter().enumerate() {
+                    jr[i] += ji * res;
+                    for (u, jk) in upper[i * p + i..(i + 1) * p].iter_mut().zip(&jrow[i..]) {
+                        *u += ji * jk;
+                    }
                 }
             }
         }
+        for i in 0..p {
+            jtr[i] = jr[i];
+            for k in i..p {
+                jtj[(i, k)] = upper[i * p + k];
+                jtj[(k, i)] = upper[i * p + k];
+            }
+        }
+        (jtj, jtr)
     }
 
     fn cost(&self, theta: &[f64], data: &Dataset, windows: &[Window], h: usize, buf: &mut Vec<f64>) -> f64 {
@@ -389,44 +584,44 @@ impl Row {
         }
     }
 
-    /// Levenberg–Marquardt on the windows from θ₀; returns the refined θ.
+    /// Levenberg–Marquardt on the windows from θ₀; returns the refined θ. Every point tried is
+    /// run once, with its sensitivities ([`Row::residuals_jacobian`]): an accepted step's run
+    /// gives the next iteration's JᵀJ and Jᵀr.
     fn refine(&self, data: &Dataset, windows: &[Window], options: &RefineOptions) -> Vec<f64> {
         let h = options.horizon;
         let p = self.theta0.len();
         let mut theta = self.theta0.clone();
+        if windows.is_empty() || p == 0 {
+            return theta;
+        }
         let mut r = Vec::new();
-        let mut cost = self.cost(&theta, data, windows, h, &mut r);
-        if !cost.is_finite() || windows.is_empty() || p == 0 {
+        let sse = |r: &[f64]| -> f64 {
+            let c: f64 = r.iter().map(|r| r * r).sum();
+            if c.is_finite() {
+                c
+            } else {
+                f64::INFINITY
+            }
+        };
+        let (mut a, mut g) = self.residuals_jacobian(&theta, data, windows, h, &mut r);
+        let mut cost = sse(&r);
+        if !cost.is_finite() {
             return theta;
         }
         let mut lambda = 1e-3;
-        let mut rp = Vec::new();
-        let mut columns = vec![Vec::new(); p];
         for _ in 0..options.max_iter {
-            // J = ∂r/∂θ by forward differences.
-            let m = r.len();
-            let mut jac = DMatrix::zeros(m, p);
-            let steps: Vec<f64> = theta.iter().map(|t| 1e-6 * t.abs().max(1.0)).collect();
-            let perturbed: Vec<Vec<f64>> = (0..p)
-                .map(|i| {
-                    let mut tp = theta.clone();
-                    tp[i] += steps[i];
-                    tp
-                })
-                .collect();
-            let thetas: Vec<&[f64]> = perturbed.iter().map(|t| t.as_slice()).collect();
-            self.residuals_of(&thetas, data, windows, h, &mut columns);
-            for (i, rp) in columns.iter().enumerate() {
-                for (row, (a, b)) in rp.iter().zip(&r).enumerate() {
-                    jac[(row, i)] = (a - b) / steps[i];
-                }
-            }
-            if jac.iter().any(|v: &f64| !v.is_finite()) {
+            if a.iter().chain(g.iter()).any(|v: &f64| !v.is_finite()) {
                 break;
             }
-            let rv = DVector::from_column_slice(&r);
-            let a = jac.tr_mul(&jac);
-            let g = jac.tr_mul(&rv);
+            // Converged when even the Gauss–Newton step (λ = 0) predicts a relative fall of the
+            // cost below the 1e-7 at which an accepted step ends the iterations (else the search
+            // below would try ever larger λ, one free run each, for a fall it cannot find).
+            if let Some(c) = a.clone().cholesky() {
+                let predicted = g.dot(&c.solve(&g));
+                if predicted.is_finite() && predicted < 1e-7 * cost {
+                    return theta;
+                }
+            }
             let mut accepted = false;
             while lambda < 1e10 {
                 let mut lhs = a.clone();
@@ -438,12 +633,13 @@ impl Row {
                     continue;
                 };
                 let trial: Vec<f64> = theta.iter().zip(delta.iter()).map(|(t, d)| t + d).collect();
-                let c = self.cost(&trial, data, windows, h, &mut rp);
+                let (at, gt) = self.residuals_jacobian(&trial, data, windows, h, &mut r);
+                let c = sse(&r);
                 if c < cost {
                     let fall = (cost - c) / cost;
                     theta = trial;
                     cost = c;
-                    std::mem::swap(&mut r, &mut rp);
+                    (a, g) = (at, gt);
                     lambda = (lambda / 3.0).max(1e-9);
                     accepted = true;
                     if fall < 1e-7 {
@@ -546,6 +742,7 @@ pub fn refine(coefficients: &mut [Coefficient], data: &Dataset, options: &Refine
             terms,
             idx.iter().map(|&i| coefficients[i].coefficient).collect(),
             data,
+            &windows,
             h,
         );
         // Cross-validation: refine on all folds but one, score the one (in parallel over folds).
@@ -587,6 +784,7 @@ pub fn refine(coefficients: &mut [Coefficient], data: &Dataset, options: &Refine
         } else {
             let theta = row.refine(data, &windows, options);
             if theta.iter().all(|t| t.is_finite()) {
+                let theta = row.original(&theta);
                 for ((&i, t), entry) in idx.iter().zip(&theta).zip(report.terms.iter_mut()) {
                     coefficients[i].coefficient = *t;
                     entry.2 = *t;
@@ -675,12 +873,12 @@ mod tests {
         ]
     }
 
-    /// The free runs with the fixed terms tabulated per sample, several coefficient vectors side
-    /// by side, are bit for bit the plain evaluation: every term by `sindy::eval_term` on the
-    /// interpolated variables at every RK4 stage (a row with fixed, loop-state-only and mixed
-    /// terms, powers and trigonometric factors).
+    /// The free runs with the fixed terms tabulated per covered sample and summed once per θ
+    /// are the plain evaluation: every term by `sindy::eval_term` on the interpolated variables
+    /// at every RK4 stage, summed in order (a row with fixed, loop-state-only and mixed terms,
+    /// powers and trigonometric factors; equal to round-off, the sums' order differs).
     #[test]
-    fn tabulated_runs_are_the_plain_runs_bit_for_bit() {
+    fn tabulated_runs_are_the_plain_runs() {
         let mut data = roll_data(6.0, 0.5, 0.9, 0.01, 2);
         for seg in data.segments.iter_mut() {
             for (k, x) in seg.x.iter_mut().chain(seg.x_next.iter_mut()).enumerate() {
@@ -707,11 +905,11 @@ mod tests {
         let theta0 = vec![-36.0, -8.4, 32.0, 0.5, 0.2, -1.5, 2.0, 0.1];
         let lp = LOOPS[1];
         let h = 30;
-        let row = Row::new(lp, terms.clone(), theta0.clone(), &data, h);
-        assert_eq!(row.columns, 4);
         let windows: Vec<Window> = (0..2)
             .flat_map(|seg| (0..250).step_by(7).map(move |start| Window { seg, start }))
             .collect();
+        let row = Row::new(lp, terms.clone(), theta0.clone(), &data, &windows, h);
+        assert_eq!(row.columns, 4);
         let plain = |theta: &[f64]| -> Vec<f64> {
             let mut out = Vec::new();
             for w in &windows {
@@ -752,12 +950,110 @@ mod tests {
             .enumerate()
             .map(|(i, t)| t * (1.0 + 0.01 * i as f64))
             .collect();
-        let mut outs = vec![Vec::new(); 2];
-        row.residuals_of(&[&theta0, &other], &data, &windows, h, &mut outs);
-        for (theta, got) in [&theta0, &other].into_iter().zip(&outs) {
+        for theta in [&theta0, &other] {
+            let mut got = Vec::new();
+            row.residuals(&row.internal(theta), &data, &windows, h, &mut got);
             let want = plain(theta);
             assert_eq!(got.len(), want.len());
-            assert!(got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()));
+            let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(scale > 1e-3);
+            assert!(got.iter().zip(&want).all(|(a, b)| (a - b).abs() <= 1e-12 * scale));
+        }
+    }
+
+    /// The forward-sensitivity Jacobian is the derivative of the free runs: its residuals are
+    /// [`Row::residuals`]' bit for bit, and JᵀJ, Jᵀr match central differences of the runs
+    /// (a row with fixed, loop-state-only and mixed terms, powers and trigonometric factors; an
+    /// angle loop and a rate-only loop).
+    #[test]
+    fn the_sensitivity_jacobian_is_the_runs_derivative() {
+        let mut data = roll_data(6.0, 0.5, 0.9, 0.01, 2);
+        for seg in data.segments.iter_mut() {
+            for (k, x) in seg.x.iter_mut().chain(seg.x_next.iter_mut()).enumerate() {
+                x[4] = 0.1 * (k as f64 * 0.05).sin();
+                x[10] = 0.3 * (k as f64 * 0.07).cos();
+                x[11] = 0.2 * (k as f64 * 0.03).sin();
+            }
+        }
+        let vars: Vec<String> = DEFAULT_STATES
+            .iter()
+            .chain(DEFAULT_INPUTS.iter())
+            .map(|s| s.to_string())
+            .collect();
+        let cases: [(Loop, &[&str], Vec<f64>); 2] = [
+            (
+                LOOPS[1],
+                &[
+                    "roll",
+                    "roll_rate",
+                    "u_roll",
+                    "pitch^2",
+                    "roll_rate*pitch_rate",
+                    "sin(roll)*cos(pitch)",
+                    "roll^2*roll_rate",
+                    "roll*cos(roll)",
+                    "u_roll*cos(pitch)",
+                    "1",
+                ],
+                vec![-36.0, -8.4, 32.0, 0.5, 0.2, -1.5, -3.0, 0.7, 2.0, 0.1],
+            ),
+            (
+                LOOPS[3],
+                &["yaw_rate", "yaw_rate^3", "sin(yaw_rate)*pitch", "u_roll", "1"],
+                vec![-5.0, -0.4, 0.3, 0.8, 0.05],
+            ),
+        ];
+        for (lp, names, theta) in cases {
+            let terms: Vec<Term> = names.iter().map(|t| parse_term(t, &vars).unwrap()).collect();
+            let h = 30;
+            let windows: Vec<Window> = (0..2)
+                .flat_map(|seg| (0..250).step_by(11).map(move |start| Window { seg, start }))
+                .collect();
+            let row = Row::new(lp, terms, theta.clone(), &data, &windows, h);
+            let theta = row.internal(&theta);
+            let p = theta.len();
+            let mut r = Vec::new();
+            let (jtj, jtr) = row.residuals_jacobian(&theta, &data, &windows, h, &mut r);
+            let mut plain = Vec::new();
+            row.residuals(&theta, &data, &windows, h, &mut plain);
+            assert_eq!(r.len(), plain.len());
+            assert!(r.iter().zip(&plain).all(|(a, b)| a.to_bits() == b.to_bits()));
+            // Central differences, column by column.
+            let mut jac = DMatrix::zeros(r.len(), p);
+            for i in 0..p {
+                let step = 1e-5 * theta[i].abs().max(1.0);
+                let (mut up, mut down) = (theta.clone(), theta.clone());
+                up[i] += step;
+                down[i] -= step;
+                let (mut ru, mut rd) = (Vec::new(), Vec::new());
+                row.residuals(&up, &data, &windows, h, &mut ru);
+                row.residuals(&down, &data, &windows, h, &mut rd);
+                for (m, (a, b)) in ru.iter().zip(&rd).enumerate() {
+                    jac[(m, i)] = (a - b) / (2.0 * step);
+                }
+            }
+            let want_jtj = jac.tr_mul(&jac);
+            let want_jtr = jac.tr_mul(&DVector::from_column_slice(&r));
+            for i in 0..p {
+                let scale = (want_jtj[(i, i)]).sqrt();
+                assert!(scale > 0.0, "{lp:?}: column {i} has no effect");
+                let jr = (jtr[i] - want_jtr[i]).abs();
+                assert!(
+                    jr <= 1e-6 * scale * (r.iter().map(|v| v * v).sum::<f64>()).sqrt(),
+                    "{lp:?} Jᵀr[{i}]: {} vs {}",
+                    jtr[i],
+                    want_jtr[i]
+                );
+                for j in 0..p {
+                    let tol = 1e-6 * scale * want_jtj[(j, j)].sqrt();
+                    assert!(
+                        (jtj[(i, j)] - want_jtj[(i, j)]).abs() <= tol,
+                        "{lp:?} JᵀJ[{i},{j}]: {} vs {}",
+                        jtj[(i, j)],
+                        want_jtj[(i, j)]
+                    );
+                }
+            }
         }
     }
 

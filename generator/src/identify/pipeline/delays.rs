@@ -2,16 +2,19 @@
 //! [`response`]), then each delay refined by the refitted model's held-out free runs over one
 //! horizon ([`horizon_delay`]). docs/identification.md, "Input delays".
 
-use super::{output, round_s, sindy_fit, stage, IdentifyOptions, Method, Report};
+use super::{output, round_s, sindy_fit, stage, IdentifyOptions, Method, OptimizerChoice, Report};
 use crate::evaluate::{horizon_score, EvaluateOptions};
 use crate::identify::dataset::{build, DatasetOptions, Targets};
 use crate::identify::excitation::Excitation;
 use crate::identify::horizon_delay::{self, HeldOut, RefineOptions};
+use crate::identify::loop_refine;
 use crate::identify::pd;
 use crate::identify::preprocess::SavGol;
 use crate::identify::response::{self, InputResponse, ScanOptions, ScanSegment};
 use crate::identify::sindy;
 use crate::logs::FlightLog;
+use crate::model::{parse_term, Term, DEFAULT_INPUTS, DEFAULT_STATES};
+use nalgebra::{DMatrix, DVector};
 
 /// The free runs of the delay refinement, s (one MPC horizon).
 const REFINE_HORIZON_S: f64 = 1.0;
@@ -123,12 +126,25 @@ fn refine_delays(
 ) -> Option<horizon_delay::Refinement> {
     let refine = RefineOptions {
         fixed: ex.silent(),
+        confirm: options.method == Method::Sindy && options.optimizer == OptimizerChoice::Stlsq,
         ..RefineOptions::default()
     };
     let min_rows = refine.min_rows(dt);
+    // Long logs: evenly spread excerpts (the stage estimates four delays; its cost follows the log).
+    let excerpt = horizon_delay::excerpt_logs(logs, horizon_delay::MAX_REFINE_S, horizon_delay::EXCERPT_S);
+    let rows = |l: &[FlightLog]| l.iter().map(|l| l.rows()).sum::<usize>();
+    if rows(&excerpt) < rows(logs) {
+        report.line(&format!(
+            "  delays over the horizon refined on {} s of the logs ({} evenly spread excerpts of at most {} s; the logs are {:.0} s long)",
+            horizon_delay::MAX_REFINE_S,
+            excerpt.iter().map(|l| l.segments.len()).sum::<usize>(),
+            horizon_delay::EXCERPT_S,
+            rows(logs) as f64 * dt
+        ));
+    }
     let splits: Vec<_> = [HeldOut::Tail, HeldOut::Head]
         .into_iter()
-        .map(|end| horizon_delay::split_logs(logs, refine.train_share, min_rows, end))
+        .map(|end| horizon_delay::split_logs(&excerpt, refine.train_share, min_rows, end))
         .collect();
     if splits.iter().any(|(_, test)| test.is_empty()) {
         report.line(&format!(
@@ -148,18 +164,45 @@ fn refine_delays(
         ..EvaluateOptions::default()
     };
     // Per split: the held-out horizon RMSE of the model refitted with `r` (free runs every
-    // `stride`-th sample, horizon_delay::SCORE_SPACING_S).
+    // `stride`-th sample, horizon_delay::SCORE_SPACING_S). SINDy (STLSQ, whose coefficients are
+    // least squares on the selected terms): the whole sweep is fitted once per split, with the
+    // start's response; a candidate refits only the rows its changed channels drive, on the
+    // terms the start's fit selected ([`refit_rows`]); the other rows are the start's.
     let stride = horizon_delay::score_stride(dt);
-    let split_rmse = |r: &InputResponse, (train, test): &(Vec<_>, Vec<_>)| -> Option<f64> {
-        let model = candidate_model(options, train, r, savgol, targets, ex)?;
+    let row_refit = refine.confirm;
+    let mut starts: Vec<Option<(crate::model::SindyFile, InputResponse)>> = vec![None; splits.len()];
+    let mut split_rmse = |i: usize, r: &InputResponse, full: bool| -> Option<f64> {
+        let (train, test) = &splits[i];
+        let model = if row_refit {
+            let file = match &starts[i] {
+                Some(_) if full => candidate_sindy(options, train, r, savgol, targets, ex)?,
+                None => {
+                    let file = candidate_sindy(options, train, r, savgol, targets, ex)?;
+                    starts[i] = Some((file.clone(), *r));
+                    file
+                }
+                Some((file, r0)) => {
+                    let rows: Vec<usize> = (0..4)
+                        .filter(|&j| r.delay[j] != r0.delay[j] || r.lag[j] != r0.lag[j])
+                        .map(|j| loop_refine::LOOPS[j].row)
+                        .collect();
+                    refit_rows(file, train, r, &rows, savgol, targets)?
+                }
+            };
+            model_of(options, &serde_json::to_string(&file).ok()?, r)?
+        } else {
+            candidate_model(options, train, r, savgol, targets, ex)?
+        };
         let e = horizon_score(&model, test, &evaluate_options, stride).ok()?;
         // A candidate whose free runs diverge is not a better model, whatever its finite runs say.
         (e.diverged == 0).then_some(e.overall_rmse?)
     };
     // The worse split's RMSE relative to the start's (the first call scores the start).
     let mut reference: Option<Vec<f64>> = None;
-    let mut score = |r: &InputResponse| -> Option<f64> {
-        let rmse: Vec<f64> = splits.iter().map(|sp| split_rmse(r, sp)).collect::<Option<_>>()?;
+    let mut score = |r: &InputResponse, full: bool| -> Option<f64> {
+        let rmse: Vec<f64> = (0..splits.len())
+            .map(|i| split_rmse(i, r, full))
+            .collect::<Option<_>>()?;
         let base = reference.get_or_insert_with(|| rmse.clone());
         rmse.iter().zip(base.iter()).map(|(a, b)| a / b).reduce(f64::max)
     };
@@ -169,8 +212,13 @@ fn refine_delays(
     match &refined {
         Some(r) => {
             report.line(&format!(
-                "  delays refined over the horizon (model refitted on {:.0} % of every segment, free runs of {} samples starting {} sample(s) apart on the rest, its first and its last part in turn; score: the worse part's overall RMSE relative to the one-step delays'): {:.3} -> {:.3}",
+                "  delays refined over the horizon (model refitted on {:.0} % of every segment{}, free runs of {} samples starting {} sample(s) apart on the rest, its first and its last part in turn; score: the worse part's overall RMSE relative to the one-step delays'): {:.3} -> {:.3}",
                 100.0 * refine.train_share,
+                if row_refit {
+                    " — a candidate refits only the rows its channel drives, on the terms of the fit with the one-step delays; a channel's two best, if at least half the required gain better, are confirmed by the whole refit"
+                } else {
+                    ""
+                },
                 evaluate_options.horizon,
                 stride,
                 r.before,
@@ -178,7 +226,7 @@ fn refine_delays(
             ));
             for c in &r.channels {
                 report.line(&format!(
-                    "  {:<10} delay {:.3} s -> {:.3} s (tried {})",
+                    "  {:<10} delay {:.3} s -> {:.3} s (tried {}){}",
                     c.input,
                     c.one_step,
                     c.delay,
@@ -186,7 +234,19 @@ fn refine_delays(
                         .iter()
                         .map(|(d, s)| format!("{d:.3}: {s:.4}"))
                         .collect::<Vec<_>>()
-                        .join(", ")
+                        .join(", "),
+                    if c.confirmed.is_empty() {
+                        String::new()
+                    } else {
+                        format!(
+                            "; by the whole refit {}",
+                            c.confirmed
+                                .iter()
+                                .map(|(d, s)| format!("{d:.3}: {s:.4}"))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )
+                    }
                 ));
             }
         }
@@ -195,6 +255,122 @@ fn refine_delays(
         ),
     }
     refined
+}
+
+/// The SINDy file `identify` would fit on `logs` with the input response `r` (as
+/// [`candidate_model`], before its corrections are attached).
+fn candidate_sindy(
+    options: &IdentifyOptions,
+    logs: &[FlightLog],
+    r: &InputResponse,
+    savgol: SavGol,
+    targets: Targets,
+    ex: &Excitation,
+) -> Option<crate::model::SindyFile> {
+    let dataset = build(
+        logs,
+        &DatasetOptions {
+            savgol,
+            response: Some(*r),
+            targets,
+            ..DatasetOptions::default()
+        },
+    )
+    .ok()?;
+    let alpha = options.alpha.unwrap_or(RIDGE_LADDER[0]);
+    let sindy_options = sindy_fit::sindy_options(options, alpha, sindy_fit::sweep(options), ex);
+    let fit = sindy::fit_with_progress(
+        &dataset,
+        &sindy_options,
+        "candidate",
+        serde_json::json!({}),
+        &mut |_, _| {},
+    )
+    .ok()?;
+    Some(fit.file)
+}
+
+/// The model of the fitted text `file` with the input response `r` attached.
+fn model_of(options: &IdentifyOptions, file: &str, r: &InputResponse) -> Option<crate::model::Model> {
+    let text = output::attach(file, options, Some(*r)).ok()?;
+    crate::model::parse(&text, "candidate model").ok()
+}
+
+/// `file` with the rows `rows` (state indices) refitted on `logs` with the input response `r`:
+/// each row's non-zero terms keep their place and take the least-squares coefficients of the
+/// data set the fit would see (the same targets, and on the integral form the same averaged
+/// library, as `sindy::fit_with_progress`) — what STLSQ's unbiased refit gives for that support.
+/// `None` when the data set cannot be built or a row's least squares is not finite.
+fn refit_rows(
+    file: &crate::model::SindyFile,
+    logs: &[FlightLog],
+    r: &InputResponse,
+    rows: &[usize],
+    savgol: SavGol,
+    targets: Targets,
+) -> Option<crate::model::SindyFile> {
+    let mut out = file.clone();
+    if rows.is_empty() {
+        return Some(out);
+    }
+    let dataset = build(
+        logs,
+        &DatasetOptions {
+            savgol,
+            response: Some(*r),
+            targets,
+            ..DatasetOptions::default()
+        },
+    )
+    .ok()?;
+    let vars: Vec<String> = DEFAULT_STATES
+        .iter()
+        .chain(DEFAULT_INPUTS.iter())
+        .map(|s| s.to_string())
+        .collect();
+    let n = dataset.len();
+    let interval = dataset.is_interval_form();
+    for &row in rows {
+        let idx: Vec<usize> = (0..out.coefficients.len())
+            .filter(|&i| out.coefficients[i].state == DEFAULT_STATES[row] && out.coefficients[i].coefficient != 0.0)
+            .collect();
+        if idx.is_empty() {
+            continue;
+        }
+        let terms: Vec<Term> = idx
+            .iter()
+            .map(|&i| parse_term(&out.coefficients[i].term, &vars).ok())
+            .collect::<Option<_>>()?;
+        let mut x = DMatrix::zeros(n, terms.len());
+        let mut y = DVector::zeros(n);
+        let mut ends = dataset.interval_ends();
+        for (m, (xs, u, dx)) in dataset.samples().enumerate() {
+            let v: Vec<f64> = xs.iter().chain(u.iter()).copied().collect();
+            let e: Option<Vec<f64>> = if interval {
+                Some(ends.next()?.iter().chain(u.iter()).copied().collect())
+            } else {
+                None
+            };
+            for (c, t) in terms.iter().enumerate() {
+                let a = sindy::eval_term(t, &v);
+                x[(m, c)] = match &e {
+                    Some(e) => 0.5 * (a + sindy::eval_term(t, e)),
+                    None => a,
+                };
+            }
+            y[m] = dx[row];
+        }
+        let svd = x.svd(true, true);
+        let tol = 1e-12 * svd.singular_values.max();
+        let coef = svd.solve(&y, tol).ok()?;
+        if coef.iter().any(|c| !c.is_finite()) {
+            return None;
+        }
+        for (&i, c) in idx.iter().zip(coef.iter()) {
+            out.coefficients[i].coefficient = *c;
+        }
+    }
+    Some(out)
 }
 
 /// The model `identify` would fit on `logs` with the input response `r`, quietly and without the
@@ -207,31 +383,19 @@ fn candidate_model(
     targets: Targets,
     ex: &Excitation,
 ) -> Option<crate::model::Model> {
-    let dataset = build(
-        logs,
-        &DatasetOptions {
-            savgol,
-            response: Some(*r),
-            targets,
-            ..DatasetOptions::default()
-        },
-    )
-    .ok()?;
     let file = match options.method {
-        Method::Sindy => {
-            let alpha = options.alpha.unwrap_or(RIDGE_LADDER[0]);
-            let sindy_options = sindy_fit::sindy_options(options, alpha, sindy_fit::sweep(options), ex);
-            let fit = sindy::fit_with_progress(
-                &dataset,
-                &sindy_options,
-                "candidate",
-                serde_json::json!({}),
-                &mut |_, _| {},
+        Method::Sindy => serde_json::to_string(&candidate_sindy(options, logs, r, savgol, targets, ex)?).ok()?,
+        Method::Pd => {
+            let dataset = build(
+                logs,
+                &DatasetOptions {
+                    savgol,
+                    response: Some(*r),
+                    targets,
+                    ..DatasetOptions::default()
+                },
             )
             .ok()?;
-            serde_json::to_string(&fit.file).ok()?
-        }
-        Method::Pd => {
             let fit = pd::fit(
                 &dataset,
                 &options.pd_options(ex).ok()?,
@@ -242,8 +406,7 @@ fn candidate_model(
             serde_json::to_string(&fit.file).ok()?
         }
     };
-    let text = output::attach(&file, options, Some(*r)).ok()?;
-    crate::model::parse(&text, "candidate model").ok()
+    model_of(options, &file, r)
 }
 
 /// `provenance.input_response`: what `input_delay = "auto"` found per channel, and the refinement
@@ -295,6 +458,7 @@ fn refinement_json(r: &horizon_delay::Refinement, options: &RefineOptions) -> se
                     "one_step": round_s(c.one_step),
                     "delay": round_s(c.delay),
                     "scores": c.scores.iter().map(|(d, s)| serde_json::json!([round_s(*d), if s.is_finite() { serde_json::json!(s) } else { serde_json::Value::Null }])).collect::<Vec<_>>(),
+                    "confirmed_by_whole_refit": c.confirmed.iter().map(|(d, s)| serde_json::json!([round_s(*d), if s.is_finite() { serde_json::json!(s) } else { serde_json::Value::Null }])).collect::<Vec<_>>(),
                 }),
             )
         })
