@@ -37,7 +37,9 @@
 //!    one-step evidence over the delay alone is ≥ `min_evidence` and the loop's held-out free runs
 //!    improve by ≥ `lag_gain` (and the delay did not make them worse: the loop model is trusted).
 
-use super::sindy::{eval_term, Library, LibraryKind};
+#[cfg(test)]
+use super::sindy::eval_term;
+use super::sindy::{Library, LibraryKind};
 use crate::model::Base;
 use crate::model::{DEFAULT_INPUTS, DEFAULT_STATES};
 use nalgebra::{DMatrix, DVector};
@@ -199,7 +201,9 @@ impl ScanSegment {
         }
     }
 
-    /// A library term at sample k (the trapezoid mean in the integral form).
+    /// A library term at sample k (the trapezoid mean in the integral form): the reference the
+    /// scan's streamed library rows are tested against.
+    #[cfg(test)]
     fn term(&self, t: &crate::model::Term, k: usize, u: &[f64; 4]) -> f64 {
         let mut v = [0.0; 16];
         v[..12].copy_from_slice(&self.x[k]);
@@ -588,49 +592,154 @@ impl LibraryScan {
         }
         let theta = Self::solve(&total);
         let terms = theta.len();
-        let residuals: Vec<Vec<f64>> = state
-            .place
-            .iter()
-            .map(|rows| {
-                rows.iter()
-                    .map(|&(f, i)| {
-                        let z = &state.z[f];
-                        let fit: f64 = (0..terms).map(|c| theta[c] * z[(i, c)]).sum();
-                        z[(i, terms)] - fit
-                    })
-                    .collect()
-            })
-            .collect();
+        let mut residuals: Vec<Vec<f64>> = state.place.iter().map(|rows| Vec::with_capacity(rows.len())).collect();
+        state.for_each_row(sc, self, |si, _, _, z| {
+            let fit: f64 = (0..terms).map(|c| theta[c] * z[c]).sum();
+            residuals[si].push(z[terms] - fit);
+        });
         effective_count(&residuals)
     }
 }
 
-/// The per-fold library matrices [Θ, y] of one driven row (fold f's rows in segment order) and
-/// their Gram matrices, for the input response `resp`.
+/// The per-fold Gram matrices of the library matrices [Θ, y] of one driven row (fold f's rows in
+/// segment order), for the input response `resp`.
 ///
-/// The scan tries one channel's delays and lags at a time, and only the library terms of that
-/// input change with them (for u_roll 11 of the 67 columns): [`LibraryState::set`] recomputes
-/// those columns and their rows and columns of the Gram matrices, each entry the same dot product
-/// of two columns that `tr_mul` computes, so the matrices are the same numbers as rebuilding
-/// everything for every candidate, at a sixth of the cost.
+/// The library matrices are never stored (they would be 68 numbers per sample): their rows are made
+/// one at a time from the data ([`LibraryState::for_each_row`]) and summed into the Gram matrices
+/// as they are made, in the order and with the eight partial sums of nalgebra's dot product, so
+/// that every entry is the number `Θᵀ Θ` of the stored matrix gives, bit for bit. The scan tries one
+/// channel's delays and lags at a time, and only the library terms of that input change with them
+/// (for u_roll 11 of the 67 columns): [`LibraryState::set`] recomputes those columns' rows and
+/// columns of the Gram matrices only.
 struct LibraryState {
     /// The target's state index.
     row: usize,
     resp: InputResponse,
     /// Per segment: the inputs of `resp` (what [`ScanSegment::inputs`] gives).
     inputs: Vec<Vec<[f64; 4]>>,
-    /// Per fold: samples × (terms + 1), the last column the target.
-    z: Vec<DMatrix<f64>>,
     gram: Vec<DMatrix<f64>>,
     /// Per segment, per used row: (fold, row of that fold's matrix).
     place: Vec<Vec<(usize, usize)>>,
+    /// Rows per fold.
+    counts: Vec<usize>,
     /// Per input channel: the library columns whose term uses it.
     uses: [Vec<usize>; 4],
-    /// Per library column of the form m(x)·u_j (u_j to the first power, last or with one other
-    /// factor): per segment, per used row, m at the interval's two ends (at the sample only, for
-    /// derivative targets); `None` for other columns. The term is then m·u_j, the same product
-    /// [`eval_term`] forms, without evaluating m (a sine, a cosine) again for every candidate.
-    multiplier: Vec<Option<Vec<Vec<[f64; 2]>>>>,
+    /// The variables whose sine and cosine some term uses.
+    sines: Vec<usize>,
+    cosines: Vec<usize>,
+}
+
+/// The variables of a library row: values, sines and cosines (those some term uses).
+struct Bases {
+    v: [f64; 16],
+    sin: [f64; 16],
+    cos: [f64; 16],
+}
+
+impl Bases {
+    fn new(x: &[f64; 12], u: &[f64; 4], sines: &[usize], cosines: &[usize]) -> Self {
+        let mut v = [0.0; 16];
+        v[..12].copy_from_slice(x);
+        v[12..].copy_from_slice(u);
+        let (mut sin, mut cos) = ([0.0; 16], [0.0; 16]);
+        for &i in sines {
+            sin[i] = v[i].sin();
+        }
+        for &i in cosines {
+            cos[i] = v[i].cos();
+        }
+        Self { v, sin, cos }
+    }
+
+    /// The term's value: the product [`eval_term`](super::sindy::eval_term) forms, factor by factor in the same order.
+    fn term(&self, t: &crate::model::Term) -> f64 {
+        let mut r = 1.0;
+        for &(base, power) in &t.factors {
+            let b = match base {
+                Base::Var(v) => self.v[v],
+                Base::Sin(v) => self.sin[v],
+                Base::Cos(v) => self.cos[v],
+            };
+            // `powi` is compiler-rt's square-and-multiply from r = 1: b¹ is 1·b = b and b² is
+            // 1·(b·b), exactly; other powers go through it as `eval_term`'s do.
+            r *= match power {
+                1 => b,
+                2 => b * b,
+                _ => b.powi(power as i32),
+            };
+        }
+        r
+    }
+}
+
+/// Running dot products of column pairs over one fold's rows, summed as nalgebra's `dot` sums
+/// them: eight partial sums over the first 8⌊n/8⌋ rows (row i into sum i mod 8), combined as
+/// (s0 + s4) + (s1 + s5) + (s2 + s6) + (s3 + s7), then the remaining rows one by one. Rows of the
+/// first part are buffered eight at a time, so that the eight sums of a pair are added together.
+struct Dots {
+    /// How many rows go into the partial sums (8⌊n/8⌋).
+    full: usize,
+    /// The buffered rows: column c of row i at `block[8 c + i mod 8]`.
+    block: Vec<f64>,
+    lanes: Vec<[f64; 8]>,
+    sums: Vec<f64>,
+    combined: bool,
+}
+
+impl Dots {
+    fn new(rows: usize, columns: usize, pairs: usize) -> Self {
+        Self {
+            full: rows - rows % 8,
+            block: vec![0.0; 8 * columns],
+            lanes: vec![[0.0; 8]; pairs],
+            sums: vec![0.0; pairs],
+            combined: false,
+        }
+    }
+
+    fn combine(&mut self) {
+        for (s, a) in self.sums.iter_mut().zip(&self.lanes) {
+            let mut r = 0.0;
+            r += a[0] + a[4];
+            r += a[1] + a[5];
+            r += a[2] + a[6];
+            r += a[3] + a[7];
+            *s = r;
+        }
+        self.combined = true;
+    }
+
+    /// Add row `i` (rows come in order) of the columns `z`.
+    fn add(&mut self, i: usize, z: &[f64], pairs: &[(usize, usize)]) {
+        if i < self.full {
+            let l = i % 8;
+            for (c, &v) in z.iter().enumerate() {
+                self.block[8 * c + l] = v;
+            }
+            if l == 7 {
+                for (acc, &(a, b)) in self.lanes.iter_mut().zip(pairs) {
+                    let (za, zb) = (&self.block[8 * a..8 * a + 8], &self.block[8 * b..8 * b + 8]);
+                    for ((x, &p), &q) in acc.iter_mut().zip(za).zip(zb) {
+                        *x += p * q;
+                    }
+                }
+            }
+        } else {
+            if !self.combined {
+                self.combine();
+            }
+            for (acc, &(a, b)) in self.sums.iter_mut().zip(pairs) {
+                *acc += z[a] * z[b];
+            }
+        }
+    }
+
+    fn finish(&mut self) -> &[f64] {
+        if !self.combined {
+            self.combine();
+        }
+        &self.sums
+    }
 }
 
 impl LibraryState {
@@ -666,90 +775,94 @@ impl LibraryState {
                 .map(|(c, _)| c)
                 .collect()
         });
-        let inputs: Vec<Vec<[f64; 4]>> = sc.segments.iter().map(|s| s.inputs(r)).collect();
-        let mut z: Vec<DMatrix<f64>> = counts.iter().map(|&n| DMatrix::zeros(n, p)).collect();
-        for ((s, rows), (u, at)) in sc.segments.iter().zip(&sc.folded.rows).zip(inputs.iter().zip(&place)) {
-            for (&(k, _), &(f, i)) in rows.iter().zip(at) {
-                let m = &mut z[f];
-                for (c, t) in lib.library.terms.iter().enumerate() {
-                    m[(i, c)] = s.term(t, k, &u[k]);
+        let mut sines = Vec::new();
+        let mut cosines = Vec::new();
+        for t in &lib.library.terms {
+            for &(b, _) in &t.factors {
+                match b {
+                    Base::Sin(v) if !sines.contains(&v) => sines.push(v),
+                    Base::Cos(v) if !cosines.contains(&v) => cosines.push(v),
+                    _ => {}
                 }
-                m[(i, p - 1)] = s.dx[k][row];
             }
         }
-        let gram = z.iter().map(|m| m.tr_mul(m)).collect();
-        let multiplier = (0..lib.library.len())
-            .map(|c| {
-                let t = &lib.library.terms[c];
-                let j = (0..4).find(|j| uses[*j].contains(&c))?;
-                let at = t
-                    .factors
-                    .iter()
-                    .position(|&(b, _)| b == crate::model::Base::Var(12 + j))?;
-                let simple = t.factors[at].1 == 1
-                    && (t.factors.len() <= 2 || at + 1 == t.factors.len())
-                    && (0..4).filter(|i| uses[*i].contains(&c)).count() == 1;
-                if !simple {
-                    return None;
-                }
-                Some(
-                    sc.segments
-                        .iter()
-                        .zip(&sc.folded.rows)
-                        .map(|(s, rows)| {
-                            rows.iter()
-                                .map(|&(k, _)| {
-                                    let mut v = [0.0; 16];
-                                    v[..12].copy_from_slice(&s.x[k]);
-                                    v[12 + j] = 1.0;
-                                    let m0 = eval_term(t, &v);
-                                    let m1 = if s.interval() {
-                                        v[..12].copy_from_slice(&s.x_next[k]);
-                                        eval_term(t, &v)
-                                    } else {
-                                        0.0
-                                    };
-                                    [m0, m1]
-                                })
-                                .collect()
-                        })
-                        .collect(),
-                )
-            })
-            .collect();
-        Self {
+        let inputs: Vec<Vec<[f64; 4]>> = sc.segments.iter().map(|s| s.inputs(r)).collect();
+        let mut state = Self {
             row,
             resp: *r,
             inputs,
-            z,
-            gram,
+            gram: vec![DMatrix::zeros(p, p); folds],
             place,
+            counts,
             uses,
-            multiplier,
+            sines,
+            cosines,
+        };
+        let all: Vec<usize> = (0..p).collect();
+        state.update(sc, lib, &all);
+        state
+    }
+
+    /// Call `f(segment, fold, row of the fold, z)` for every used row, in segment order, with z the
+    /// library row [Θ, y] of the current response and target: each term at the sample (the
+    /// trapezoid mean over the interval in the integral form, as [`ScanSegment::term`] gives it).
+    fn for_each_row(&self, sc: &Scanner, lib: &LibraryScan, mut f: impl FnMut(usize, usize, usize, &[f64])) {
+        let p = lib.library.len() + 1;
+        let mut z = vec![0.0; p];
+        for (si, ((s, rows), (u, at))) in sc
+            .segments
+            .iter()
+            .zip(&sc.folded.rows)
+            .zip(self.inputs.iter().zip(&self.place))
+            .enumerate()
+        {
+            for (&(k, _), &(fold, i)) in rows.iter().zip(at) {
+                let here = Bases::new(&s.x[k], &u[k], &self.sines, &self.cosines);
+                if s.interval() {
+                    let next = Bases::new(&s.x_next[k], &u[k], &self.sines, &self.cosines);
+                    for (c, t) in lib.library.terms.iter().enumerate() {
+                        z[c] = 0.5 * (here.term(t) + next.term(t));
+                    }
+                } else {
+                    for (c, t) in lib.library.terms.iter().enumerate() {
+                        z[c] = here.term(t);
+                    }
+                }
+                z[p - 1] = s.dx[k][self.row];
+                f(si, fold, i, &z);
+            }
         }
     }
 
-    /// Make the target column that of state `row`.
-    fn set_row(&mut self, sc: &Scanner, row: usize) {
-        if row == self.row {
-            return;
-        }
-        for ((s, rows), at) in sc.segments.iter().zip(&sc.folded.rows).zip(&self.place) {
-            for (&(k, _), &(f, i)) in rows.iter().zip(at) {
-                let m = &mut self.z[f];
-                let c = m.ncols() - 1;
-                m[(i, c)] = s.dx[k][row];
+    /// Recompute the Gram matrices' rows and columns `cols` from the rows of the current response.
+    fn update(&mut self, sc: &Scanner, lib: &LibraryScan, cols: &[usize]) {
+        let p = lib.library.len() + 1;
+        // (a, b) for every a of `cols` and every b, each unordered pair once.
+        let mut pairs = Vec::new();
+        for (n, &a) in cols.iter().enumerate() {
+            for b in 0..p {
+                if b == a || !cols[..n].contains(&b) {
+                    pairs.push((a, b));
+                }
             }
         }
-        for (m, g) in self.z.iter().zip(self.gram.iter_mut()) {
-            let a = m.ncols() - 1;
-            for b in 0..m.ncols() {
-                let v = m.column(a).dot(&m.column(b));
+        let mut dots: Vec<Dots> = self.counts.iter().map(|&n| Dots::new(n, p, pairs.len())).collect();
+        self.for_each_row(sc, lib, |_, fold, i, z| dots[fold].add(i, z, &pairs));
+        for (g, d) in self.gram.iter_mut().zip(&mut dots) {
+            for (&(a, b), &v) in pairs.iter().zip(d.finish()) {
                 g[(a, b)] = v;
                 g[(b, a)] = v;
             }
         }
+    }
+
+    /// Make the target column that of state `row`.
+    fn set_row(&mut self, sc: &Scanner, lib: &LibraryScan, row: usize) {
+        if row == self.row {
+            return;
+        }
         self.row = row;
+        self.update(sc, lib, &[lib.library.len()]);
     }
 
     /// Make the matrices those of the response `r` (see the type's documentation).
@@ -776,52 +889,8 @@ impl LibraryState {
                 }
             }
         }
-        for (si, ((s, rows), (u, at))) in sc
-            .segments
-            .iter()
-            .zip(&sc.folded.rows)
-            .zip(self.inputs.iter().zip(&self.place))
-            .enumerate()
-        {
-            for &c in &cols {
-                let t = &lib.library.terms[c];
-                let j = (0..4).find(|j| self.uses[*j].contains(&c)).unwrap_or(0);
-                match &self.multiplier[c] {
-                    Some(mult) => {
-                        for ((&(k, _), &(f, i)), m) in rows.iter().zip(at).zip(&mult[si]) {
-                            let uj = u[k][j];
-                            self.z[f][(i, c)] = if s.interval() {
-                                0.5 * (m[0] * uj + m[1] * uj)
-                            } else {
-                                m[0] * uj
-                            };
-                        }
-                    }
-                    None => {
-                        for (&(k, _), &(f, i)) in rows.iter().zip(at) {
-                            self.z[f][(i, c)] = s.term(t, k, &u[k]);
-                        }
-                    }
-                }
-            }
-        }
-        let mut updated = vec![false; self.z.first().map_or(0, |m| m.ncols())];
-        for (m, g) in self.z.iter().zip(self.gram.iter_mut()) {
-            updated.iter_mut().for_each(|u| *u = false);
-            for &a in &cols {
-                updated[a] = true;
-                for b in 0..m.ncols() {
-                    // (b, a) of an updated b is already there: the same products summed the same way.
-                    if b != a && updated[b] {
-                        continue;
-                    }
-                    let v = m.column(a).dot(&m.column(b));
-                    g[(a, b)] = v;
-                    g[(b, a)] = v;
-                }
-            }
-        }
         self.resp = *r;
+        self.update(sc, lib, &cols);
     }
 
     /// The per-fold Gram matrices of [Θ, y] with the inputs of `r`.
@@ -929,7 +998,7 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
                 channels[j] = Some(silent_channel(j));
                 continue;
             }
-            state.borrow_mut().set_row(&sc, row);
+            state.borrow_mut().set_row(&sc, &lib, row);
             let score = |d: f64, l: Option<f64>| {
                 LibraryScan::cv_sse(state.borrow_mut().grams(&sc, &lib, &with_channel(&cur, j, d, l)))
             };
@@ -1238,8 +1307,9 @@ mod tests {
     }
 
     /// The scan's incremental update (only one channel's columns and Gram rows recomputed) gives
-    /// the same matrices, bit for bit, as building them afresh for the response; derivative and
-    /// integral form, with delays and a lag.
+    /// the same matrices, bit for bit, as building them afresh for the response, and both are
+    /// nalgebra's `Θᵀ Θ` of the stored library matrices; derivative and integral form, with delays
+    /// and a lag.
     #[test]
     fn updated_library_matrices_are_the_rebuilt_ones() {
         for seg in [
@@ -1266,14 +1336,28 @@ mod tests {
             for (j, d, l) in steps {
                 r = with_channel(&r, j, d, l);
                 for row in [9, 8] {
-                    state.set_row(&sc, row);
+                    state.set_row(&sc, &lib, row);
                     let grams: Vec<DMatrix<f64>> = state.grams(&sc, &lib, &r).to_vec();
                     let fresh = LibraryState::new(&lib, &sc, &r, row);
                     for (a, b) in grams.iter().zip(&fresh.gram) {
                         assert!(a.iter().zip(b.iter()).all(|(x, y)| x.to_bits() == y.to_bits()));
                     }
-                    for (a, b) in state.z.iter().zip(&fresh.z) {
-                        assert!(a.iter().zip(b.iter()).all(|(x, y)| x.to_bits() == y.to_bits()));
+                    // The stored library matrices (each entry `ScanSegment::term`) and their Gram
+                    // matrices by nalgebra: the same numbers, bit for bit.
+                    let p = lib.library.len() + 1;
+                    let u: Vec<[f64; 4]> = segments[0].inputs(&r);
+                    for (f, g) in grams.iter().enumerate() {
+                        let rows: Vec<usize> = sc.folded.rows[0].iter().filter(|x| x.1 == f).map(|x| x.0).collect();
+                        let z = DMatrix::from_fn(rows.len(), p, |i, c| {
+                            let k = rows[i];
+                            if c + 1 == p {
+                                segments[0].dx[k][row]
+                            } else {
+                                segments[0].term(&lib.library.terms[c], k, &u[k])
+                            }
+                        });
+                        let stored = z.tr_mul(&z);
+                        assert!(g.iter().zip(stored.iter()).all(|(x, y)| x.to_bits() == y.to_bits()));
                     }
                 }
             }

@@ -105,15 +105,17 @@ impl<R: BufRead> Lines for ReaderLines<R> {
         }
         self.offset += self.buf.len();
         self.buf.clear();
-        self.reader.read_until(b'\n', &mut self.buf).map_err(|e| io_error(&self.file, e))?;
+        self.reader
+            .read_until(b'\n', &mut self.buf)
+            .map_err(|e| io_error(&self.file, e))?;
         let first = self.offset == 0;
         let ends = self.buf.last() == Some(&b'\n');
         if !ends {
             // The last line (the whole file when it has no LF).
             self.done = true;
         }
-        let text = std::str::from_utf8(&self.buf)
-            .map_err(|e| not_utf8(&self.file, &self.buf, self.offset, self.number, e))?;
+        let text =
+            std::str::from_utf8(&self.buf).map_err(|e| not_utf8(&self.file, &self.buf, self.offset, self.number, e))?;
         let mut text = if first {
             text.strip_prefix('\u{feff}').unwrap_or(text)
         } else {
@@ -205,6 +207,9 @@ mod tests {
         assert_eq!(e.line, Some(3));
         assert_eq!(e.message, "not UTF-8 text (invalid byte at offset 7)");
         let e = read_all(b"a\rb\xc3").unwrap_err();
-        assert_eq!((e.line, e.message.as_str()), (Some(1), "not UTF-8 text (invalid byte at offset 3)"));
+        assert_eq!(
+            (e.line, e.message.as_str()),
+            (Some(1), "not UTF-8 text (invalid byte at offset 3)")
+        );
     }
 }
