@@ -398,11 +398,11 @@ pub fn base_side(model: &Model, logs: &[FlightLog], options: &DiagnoseOptions) -
     };
     let data = data::prepare(&base, &options.savgol, options.residual, &[], logs, 1)?;
     let plain = Augmented::plain(&base, ctx);
-    let mut pool = shrink::Pool::default();
-    for seg in &data.raw {
-        pool.add(&plain, seg, options.horizon);
-    }
-    Ok(pool.side())
+    Ok(shrink::side(|pool| {
+        for seg in &data.raw {
+            pool.add(&plain, seg, options.horizon);
+        }
+    }))
 }
 
 /// `[j][c]`: dynamic row c of the base model depends on input j (structurally, from the IR).
@@ -687,8 +687,8 @@ fn shrink_figures(
         });
         Some(ReferenceShrink {
             data: "the held-out flights logged without sensor noise".to_string(),
-            before: before.side(),
-            after: after.side(),
+            before,
+            after,
         })
     };
     let shrink = Shrink::new(
@@ -702,8 +702,8 @@ fn shrink_figures(
         },
         state.named.iter().map(|k| k.name().to_string()).collect(),
         options.horizon,
-        before.side(),
-        after.side(),
+        before,
+        after,
         ClosedLoop {
             status: "not run".to_string(),
             plant: options.plant.as_ref().map(|p| p.display().to_string()),

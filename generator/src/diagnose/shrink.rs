@@ -8,25 +8,49 @@ use super::catalogue::CHANNELS;
 use super::data::SegData;
 use super::problem::{Problem, State};
 use super::residuals::{filter, ResidualKind};
+use crate::evaluate::pooled::{MeanBook, Stat};
 use crate::evaluate::{wrap_angle, DIVERGENCE_BOUND};
 use crate::logs::{on_ground, run_touches_ground};
 use crate::logs::{STATE_COLUMNS, YAW};
-use crate::metrics::{compare, Metrics};
+use crate::metrics::Metrics;
 use serde::Serialize;
 
-/// Predictions pooled over segments.
-#[derive(Default)]
+/// Predictions pooled over segments, streamed into running sums as they are made, never stored
+/// (a horizon of H samples makes H predictions per sample): `evaluate`'s [`Stat`]s, which give
+/// `metrics::compare`'s figures on the pooled rows to the bit, d₁ about a provisional mean of the
+/// observations (see [`side`]).
 pub(crate) struct Pool {
-    one_pred: Vec<[f64; 6]>,
-    one_obs: Vec<[f64; 6]>,
-    hor_pred: Vec<[f64; 12]>,
-    hor_obs: Vec<[f64; 12]>,
-    end_pred: Vec<[f64; 12]>,
-    end_obs: Vec<[f64; 12]>,
+    /// No model run: every one-step prediction finite and every free run complete, to find the
+    /// pooled observations' means (they depend on the data alone unless something diverges).
+    observe: bool,
+    book: MeanBook,
+    one: Stat,
+    hor: Stat,
+    end: Stat,
     step_sq: Vec<f64>,
     step_n: Vec<usize>,
     runs: usize,
     diverged: usize,
+}
+
+/// The figures of the rows `feed` adds to a pool (it is called up to three times, adding the same
+/// segments with the same models each time): a pass without free runs finds the pooled
+/// observations' means, a pass with them streams the predictions, and only where a prediction
+/// diverged (the means were then not the pooled rows') a third pass with the exact means. The
+/// figures are those of `metrics::compare` on the stored rows, to the bit.
+pub(crate) fn side(mut feed: impl FnMut(&mut Pool)) -> Side {
+    let mut observed = Pool::new(true, Vec::new());
+    feed(&mut observed);
+    observed.side();
+    let mut pool = Pool::new(false, observed.book.found());
+    feed(&mut pool);
+    let side = pool.side();
+    if pool.book.exact() {
+        return side;
+    }
+    let mut again = Pool::new(false, pool.book.found());
+    feed(&mut again);
+    again.side()
 }
 
 fn finite(x: &[f64]) -> bool {
@@ -99,19 +123,28 @@ pub(crate) fn pools<'d>(
     state: &State,
     before_raw: bool,
     seg: impl Fn(usize, bool) -> Option<&'d SegData>,
-) -> (Pool, Pool) {
+) -> (Side, Side) {
     let plain = Augmented::plain(p.base, p.ctx);
-    let (mut before, mut after) = (Pool::default(), Pool::default());
-    for i in p.test_fits() {
-        let aug = p.augmented(state, i);
-        for &s in &p.fits[i].test {
-            let base_variant = state.destale && !before_raw;
-            if let (Some(raw), Some(variant)) = (seg(s, base_variant), seg(s, state.destale)) {
-                before.add(&whole_samples(&plain, raw.dt), raw, p.options.horizon);
-                after.add(&whole_samples(&aug, variant.dt), variant, p.options.horizon);
+    let base_variant = state.destale && !before_raw;
+    let before = side(|pool| {
+        for i in p.test_fits() {
+            for &s in &p.fits[i].test {
+                if let (Some(raw), Some(_)) = (seg(s, base_variant), seg(s, state.destale)) {
+                    pool.add(&whole_samples(&plain, raw.dt), raw, p.options.horizon);
+                }
             }
         }
-    }
+    });
+    let after = side(|pool| {
+        for i in p.test_fits() {
+            let aug = p.augmented(state, i);
+            for &s in &p.fits[i].test {
+                if let (Some(_), Some(variant)) = (seg(s, base_variant), seg(s, state.destale)) {
+                    pool.add(&whole_samples(&aug, variant.dt), variant, p.options.horizon);
+                }
+            }
+        }
+    });
     (before, after)
 }
 
@@ -126,22 +159,51 @@ fn whole_samples<'a>(a: &Augmented<'a>, dt: f64) -> Augmented<'a> {
 }
 
 impl Pool {
+    fn new(observe: bool, means: Vec<Vec<f64>>) -> Self {
+        let mut book = MeanBook::with_means(means);
+        let (one, hor, end) = (book.stat(CHANNELS.len()), book.stat(12), book.stat(12));
+        Self {
+            observe,
+            book,
+            one,
+            hor,
+            end,
+            step_sq: Vec::new(),
+            step_n: Vec::new(),
+            runs: 0,
+            diverged: 0,
+        }
+    }
+
     pub fn add(&mut self, aug: &Augmented, seg: &SegData, horizon: usize) {
         let r = one_step_residual(aug, seg);
         for ((obs, res), airborne) in seg.dx.iter().zip(&r).zip(&seg.airborne) {
             let pred: [f64; 6] = std::array::from_fn(|c| obs[c] - res[c]);
             if *airborne && finite(&pred) {
-                self.one_pred.push(pred);
-                self.one_obs.push(*obs);
+                self.one.push(&pred, obs, None);
             }
         }
         if self.step_sq.len() < horizon {
             self.step_sq.resize(horizon, 0.0);
             self.step_n.resize(horizon, 0);
         }
-        let seen = aug.seen_inputs(seg);
         let n = seg.len();
         let ground = on_ground(&seg.x);
+        if self.observe {
+            for k in 0..n.saturating_sub(horizon) {
+                if run_touches_ground(&ground, k, horizon) {
+                    continue;
+                }
+                for o in &seg.x[k + 1..=k + horizon] {
+                    self.hor.push(o, o, None);
+                }
+                if horizon > 0 {
+                    self.end.push(&seg.x[k + horizon], &seg.x[k + horizon], None);
+                }
+            }
+            return;
+        }
+        let seen = aug.seen_inputs(seg);
         for k in 0..n.saturating_sub(horizon) {
             if run_touches_ground(&ground, k, horizon) {
                 continue;
@@ -153,25 +215,25 @@ impl Pool {
                 let p = wrapped(p, o);
                 self.step_sq[j] += (0..12).map(|i| (p[i] - o[i]).powi(2)).sum::<f64>();
                 self.step_n[j] += 1;
-                self.hor_pred.push(p);
-                self.hor_obs.push(*o);
+                self.hor.push(&p, o, None);
             }
             if pred.len() == horizon {
                 let o = &seg.x[k + horizon];
-                self.end_pred.push(wrapped(&pred[horizon - 1], o));
-                self.end_obs.push(*o);
+                self.end.push(&wrapped(&pred[horizon - 1], o), o, None);
             } else {
                 self.diverged += 1;
             }
         }
     }
 
-    pub fn side(&self) -> Side {
-        let metrics = |p: &[[f64; 12]], o: &[[f64; 12]]| compare(p, o, &STATE_COLUMNS).ok();
+    fn side(&mut self) -> Side {
+        let channels: Vec<String> = CHANNELS.iter().map(|c| c.to_string()).collect();
+        let states: Vec<String> = STATE_COLUMNS.iter().map(|c| c.to_string()).collect();
+        let book = &mut self.book;
         Side {
-            one_step: compare(&self.one_pred, &self.one_obs, &CHANNELS).ok(),
-            horizon: metrics(&self.hor_pred, &self.hor_obs),
-            horizon_end: metrics(&self.end_pred, &self.end_obs),
+            one_step: self.one.metrics(&channels, book).ok().flatten(),
+            horizon: self.hor.metrics(&states, book).ok().flatten(),
+            horizon_end: self.end.metrics(&states, book).ok().flatten(),
             rmse_by_step: self
                 .step_sq
                 .iter()

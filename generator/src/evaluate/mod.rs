@@ -18,7 +18,7 @@
 
 mod inputs;
 mod plot;
-mod pooled;
+pub(crate) mod pooled;
 
 pub use plot::{plot_states, write_svg, PlotKind};
 

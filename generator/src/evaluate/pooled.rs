@@ -17,7 +17,7 @@ use crate::metrics::{overall, Metrics, MetricsError, Series};
 /// The provisional means of the [`Stat`]s of one evaluation, in the order they are created, and
 /// the exact means found for them.
 #[derive(Clone, Debug, Default)]
-pub(super) struct MeanBook {
+pub(crate) struct MeanBook {
     given: Vec<Vec<f64>>,
     found: Vec<Option<Vec<f64>>>,
 }
@@ -71,7 +71,7 @@ impl MeanBook {
 
 /// The running sums of one pooled series (see the module documentation).
 #[derive(Clone, Debug)]
-pub(super) struct Stat {
+pub(crate) struct Stat {
     id: usize,
     n: usize,
     /// The first observation, O₁ (empty before the first row).

@@ -154,22 +154,28 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
                 }
                 continue;
             }
+            // What is computed over the whole segment (derivatives, smoothed or low-passed
+            // series) is trimmed in place; the logged states are copied once, trimmed.
             let dx = try_columnwise(&seg.x, |y| options.savgol.try_derivative(y, dt)).map_err(err)?;
-            let mut x = if options.smooth_states {
-                try_columnwise(&seg.x, |y| options.savgol.try_smooth(y)).map_err(err)?
+            let smoothed = if options.smooth_states {
+                Some(try_columnwise(&seg.x, |y| options.savgol.try_smooth(y)).map_err(err)?)
             } else {
-                seg.x.clone()
+                None
             };
-            let (mut u, max_shift) = match &options.response {
+            let (u, max_shift) = match &options.response {
                 Some(r) => (r.regressors(&seg.u, dt), r.warmup(dt)),
                 None => shifted_inputs(&seg.u, &options.input_delay, dt),
             };
-            let mut dx = dx;
-            if let Some(lp) = &options.lowpass {
-                x = try_columnwise(&x, |y| lp.try_apply(y, dt)).map_err(err)?;
-                u = try_columnwise(&u, |y| lp.try_apply(y, dt)).map_err(err)?;
-                dx = try_columnwise(&dx, |y| lp.try_apply(y, dt)).map_err(err)?;
-            }
+            let (x, mut u, mut dx) = match &options.lowpass {
+                Some(lp) => {
+                    let x = smoothed.unwrap_or_else(|| seg.x.clone());
+                    let x = try_columnwise(&x, |y| lp.try_apply(y, dt)).map_err(err)?;
+                    let u = try_columnwise(&u, |y| lp.try_apply(y, dt)).map_err(err)?;
+                    let dx = try_columnwise(&dx, |y| lp.try_apply(y, dt)).map_err(err)?;
+                    (Some(x), u, dx)
+                }
+                None => (smoothed, u, dx),
+            };
             let (start, end) = if options.trim_edges {
                 let h = options.savgol.half_window();
                 (h.max(max_shift), seg.t.len() - h)
@@ -179,14 +185,23 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
             if start >= end {
                 continue;
             }
+            let x = match x {
+                Some(mut x) => {
+                    trim(&mut x, start, end);
+                    x
+                }
+                None => seg.x[start..end].to_vec(),
+            };
+            trim(&mut u, start, end);
+            trim(&mut dx, start, end);
             segments.push(SegmentData {
                 log: li,
                 segment: si,
                 dt,
                 t: seg.t[start..end].to_vec(),
-                x: x[start..end].to_vec(),
-                u: u[start..end].to_vec(),
-                dx: dx[start..end].to_vec(),
+                x,
+                u,
+                dx,
                 x_next: Vec::new(),
             });
         }
@@ -204,6 +219,12 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
         });
     }
     Ok(Dataset { segments })
+}
+
+/// Keep `v[start..end]`, in place (no second copy of the series).
+fn trim<T>(v: &mut Vec<T>, start: usize, end: usize) {
+    v.truncate(end);
+    v.drain(..start);
 }
 
 /// u_j(t − d_j): each channel shifted by its delay in whole samples (the first sample repeated
@@ -229,7 +250,7 @@ fn interval_segment(
     u: &[[f64; 4]],
     options: &DatasetOptions,
 ) -> Option<SegmentData> {
-    let (u, start) = match &options.response {
+    let (mut u, start) = match &options.response {
         Some(r) => (r.interval_inputs(u, dt), r.warmup(dt)),
         None => shifted_inputs(u, &options.input_delay, dt),
     };
@@ -237,6 +258,7 @@ fn interval_segment(
     if start >= end {
         return None;
     }
+    trim(&mut u, start, end);
     let dx = (start..end)
         .map(|k| {
             let h = t[k + 1] - t[k];
@@ -249,7 +271,7 @@ fn interval_segment(
         dt,
         t: t[start..end].to_vec(),
         x: x[start..end].to_vec(),
-        u: u[start..end].to_vec(),
+        u,
         dx,
         x_next: x[start + 1..end + 1].to_vec(),
     })

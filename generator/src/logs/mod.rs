@@ -9,6 +9,7 @@
 //! the column; no input makes the reader panic. See `docs/logs.md`.
 
 mod error;
+mod lines;
 mod parse;
 mod quality;
 pub mod resample;
@@ -109,28 +110,37 @@ impl Segment {
 }
 
 /// Read and validate a flight log; errors name the file as `path` displays.
+///
+/// The file is read line by line through a buffer and never held whole as text (the rows are:
+/// docs/logs.md, "Memory"); the errors are those of [`parse_log`] on the file's text, and a file
+/// that is not UTF-8 is an encoding error wherever its first invalid byte lies.
 pub fn read_log(path: &Path) -> Result<FlightLog, LogError> {
     let label = path.display().to_string();
-    let bytes = std::fs::read(path)
+    let file = std::fs::File::open(path)
         .map_err(|e| LogError::new(&label, None, None, LogErrorKind::Io, format!("cannot read: {e}")))?;
-    let text = String::from_utf8(bytes).map_err(|e| {
-        let bad = e.utf8_error().valid_up_to();
-        let bytes = e.as_bytes();
-        let line = bytes[..bad.min(bytes.len())].iter().filter(|&&b| b == b'\n').count() + 1;
-        LogError::new(
-            &label,
-            Some(line),
-            None,
-            LogErrorKind::Encoding,
-            format!("not UTF-8 text (invalid byte at offset {bad})"),
-        )
-    })?;
-    parse_log(&text, &label)
+    let mut lines = lines::ReaderLines::new(std::io::BufReader::with_capacity(1 << 16, file), &label);
+    let table = match parse::parse(&mut lines, &label) {
+        Ok(table) => table,
+        Err(e) => {
+            // Reading the whole text first would have found a read or encoding error anywhere.
+            let first = match e.kind {
+                LogErrorKind::Io | LogErrorKind::Encoding => None,
+                _ => lines.error_in_rest(),
+            };
+            return Err(first.unwrap_or(e));
+        }
+    };
+    drop(lines);
+    from_table(table, &label)
 }
 
 /// Validate log text; `label` names the file in errors and in [`FlightLog::source`].
 pub fn parse_log(text: &str, label: &str) -> Result<FlightLog, LogError> {
-    let table = parse::parse(text, label)?;
+    from_table(parse::parse(&mut lines::TextLines::new(text), label)?, label)
+}
+
+/// The segments and the quality report of a validated table.
+fn from_table(table: parse::Table, label: &str) -> Result<FlightLog, LogError> {
     let measured = segments::measured_period(&table.rows);
     // The nominal period: the metadata rate if given (a contradicting time column shows in the
     // report's warnings), else the median step. A metadata rate under which more than 90 % of the

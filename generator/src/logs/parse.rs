@@ -1,7 +1,8 @@
-//! Text → metadata, header and validated rows. One pass over the lines, so
+//! Lines → metadata, header and validated rows. One pass over the lines, so
 //! the first problem in file order is the one reported.
 
 use super::error::{LogError, LogErrorKind as K};
+use super::lines::Lines;
 use super::{INPUT_COLUMNS, STATE_COLUMNS};
 use std::collections::HashMap;
 
@@ -40,33 +41,23 @@ struct Columns {
 /// Longest cell text quoted in a message.
 const QUOTE_MAX: usize = 40;
 
-pub(super) fn parse(text: &str, file: &str) -> Result<Table, LogError> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    if text.trim().is_empty() {
-        return Err(LogError::new(
-            file,
-            None,
-            None,
-            K::Empty,
-            "the file is empty: expected `# key: value` metadata lines, a header row naming the columns, and data rows",
-        ));
-    }
-    // Line ends LF or CRLF, or CR alone (old Mac exports: a file with CR and no LF).
-    let end = if text.contains('\r') && !text.contains('\n') {
-        '\r'
-    } else {
-        '\n'
-    };
-    let mut lines = text
-        .split(end)
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)));
-
+/// The lines as a validated table; a file of only white space is [`K::Empty`].
+pub(super) fn parse(lines: &mut impl Lines, file: &str) -> Result<Table, LogError> {
     // Metadata comments, then the header.
     let mut metadata = Vec::new();
     let mut rate_hz: Option<(f64, usize)> = None;
-    let (header_line, header) = loop {
-        let Some((n, line)) = lines.next() else {
+    let mut blank = true;
+    let cols = loop {
+        let Some((n, line)) = lines.next_line()? else {
+            if blank {
+                return Err(LogError::new(
+                    file,
+                    None,
+                    None,
+                    K::Empty,
+                    "the file is empty: expected `# key: value` metadata lines, a header row naming the columns, and data rows",
+                ));
+            }
             return Err(LogError::new(
                 file,
                 None,
@@ -79,6 +70,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Table, LogError> {
         if trimmed.is_empty() {
             continue;
         }
+        blank = false;
         if let Some(comment) = trimmed.strip_prefix('#') {
             if let Some((key, value)) = metadata_entry(comment) {
                 if key == "rate_hz" {
@@ -101,12 +93,11 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Table, LogError> {
             }
             continue;
         }
-        break (n, line);
+        break columns(file, n, line)?;
     };
-    let cols = columns(file, header_line, header)?;
 
     let mut rows: Vec<Row> = Vec::new();
-    for (n, line) in lines {
+    while let Some((n, line)) = lines.next_line()? {
         let trimmed = line.trim();
         if trimmed.is_empty() || trimmed.starts_with('#') {
             continue;
@@ -137,7 +128,7 @@ pub(super) fn parse(text: &str, file: &str) -> Result<Table, LogError> {
     if rows.is_empty() {
         return Err(LogError::new(
             file,
-            Some(header_line),
+            Some(cols.header_line),
             None,
             K::NoData,
             "no data rows after the header",
