@@ -768,19 +768,10 @@ pub fn refine(coefficients: &mut [Coefficient], data: &Dataset, options: &Refine
                 .map(|h| h.join().unwrap_or((f64::INFINITY, f64::INFINITY, 0)))
                 .collect()
         });
-        let (before, after, n) = scores
-            .iter()
-            .fold((0.0, 0.0, 0usize), |(a, b, n), s| (a + s.0, b + s.1, n + s.2));
-        let rms = |sse: f64| if n > 0 { (sse / n as f64).sqrt() } else { f64::NAN };
-        report.held_out_rmse = (rms(before), rms(after));
-        if !(before.is_finite() && after.is_finite()) || n == 0 {
-            report.note = Some("the held-out free runs are not finite".into());
-        } else if after > (1.0 - options.min_gain) * before {
-            report.note = Some(format!(
-                "held-out gain {:.1} % < {:.0} %",
-                100.0 * (1.0 - after / before),
-                100.0 * options.min_gain
-            ));
+        let (held_out_rmse, not_kept) = held_out_verdict(&scores, options.min_gain);
+        report.held_out_rmse = held_out_rmse;
+        if let Some(why) = not_kept {
+            report.note = Some(why);
         } else {
             let theta = row.refine(data, &windows, options);
             if theta.iter().all(|t| t.is_finite()) {
@@ -797,6 +788,28 @@ pub fn refine(coefficients: &mut [Coefficient], data: &Dataset, options: &Refine
         out.push(report);
     }
     out
+}
+
+/// The kept rule over the folds' held-out scores `(SSE before, SSE after, samples)`: the held-out
+/// RMSE before and after the refinement, and why it is not kept (`None`: kept — its free runs are
+/// finite and at least `min_gain` better on data it was not fitted on).
+pub(crate) fn held_out_verdict(scores: &[(f64, f64, usize)], min_gain: f64) -> ((f64, f64), Option<String>) {
+    let (before, after, n) = scores
+        .iter()
+        .fold((0.0, 0.0, 0usize), |(a, b, n), s| (a + s.0, b + s.1, n + s.2));
+    let rms = |sse: f64| if n > 0 { (sse / n as f64).sqrt() } else { f64::NAN };
+    let why = if !(before.is_finite() && after.is_finite()) || n == 0 {
+        Some("the held-out free runs are not finite".into())
+    } else if after > (1.0 - min_gain) * before {
+        Some(format!(
+            "held-out gain {:.1} % < {:.0} %",
+            100.0 * (1.0 - after / before),
+            100.0 * min_gain
+        ))
+    } else {
+        None
+    };
+    ((rms(before), rms(after)), why)
 }
 
 #[cfg(test)]

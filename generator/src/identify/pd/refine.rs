@@ -36,7 +36,7 @@
 
 use super::regressors::{inertia_columns, mass_matrix};
 use crate::identify::dataset::{Dataset, SegmentData};
-use crate::identify::loop_refine::{Loop, LoopRefinement, RefineOptions, LOOPS};
+use crate::identify::loop_refine::{held_out_verdict, Loop, LoopRefinement, RefineOptions, LOOPS};
 use nalgebra::{DMatrix, DVector};
 
 /// One PD attitude loop: the loop it is (row and judged angle), its axis (0 roll, 1 pitch) and its
@@ -427,19 +427,10 @@ pub fn refine(
                 .map(|h| h.join().unwrap_or((f64::INFINITY, f64::INFINITY, 0)))
                 .collect()
         });
-        let (before, after, n) = scores
-            .iter()
-            .fold((0.0, 0.0, 0usize), |(a, b, n), s| (a + s.0, b + s.1, n + s.2));
-        let rms = |sse: f64| if n > 0 { (sse / n as f64).sqrt() } else { f64::NAN };
-        report.held_out_rmse = (rms(before), rms(after));
-        if !(before.is_finite() && after.is_finite()) || n == 0 {
-            report.note = Some("the held-out free runs are not finite".into());
-        } else if after > (1.0 - options.min_gain) * before {
-            report.note = Some(format!(
-                "held-out gain {:.1} % < {:.0} %",
-                100.0 * (1.0 - after / before),
-                100.0 * options.min_gain
-            ));
+        let (held_out_rmse, not_kept) = held_out_verdict(&scores, options.min_gain);
+        report.held_out_rmse = held_out_rmse;
+        if let Some(why) = not_kept {
+            report.note = Some(why);
         } else {
             let theta = runs.refine(&theta0, &lo, &windows, options);
             let refined = runs.xi_of(&theta);
