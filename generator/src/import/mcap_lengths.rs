@@ -91,6 +91,20 @@ fn scan(bytes: &[u8], mut at: usize, end: usize, chunk_end: Option<u64>) -> Opti
                     Field::Prefixed64 => (8, u64_at(bytes, pos)?),
                 };
                 let start = pos as u64 + prefix;
+                // At the top level a string or map longer than the whole rest of the file is no
+                // truncation's doing (a cut file ends inside it, it does not declare gigabytes): the
+                // crate would allocate it whole (out of memory from an 87-byte record head, found by
+                // fuzzing `import_csv` with an MCAP-looking input).
+                if chunk_end.is_none() && prefix == 4 && start.saturating_add(n) > bytes.len() as u64 {
+                    return Some((
+                        at,
+                        format!(
+                            "its {name} record's field {} declares {n} bytes, more than the {} bytes left in the file",
+                            i + 1,
+                            (bytes.len() as u64).saturating_sub(start)
+                        ),
+                    ));
+                }
                 if start.saturating_add(n) > declared_end {
                     return Some((
                         at,
@@ -274,6 +288,24 @@ mod tests {
         let (at, what) = first_oversized_field(&f).expect("found");
         assert_eq!(at, 8);
         assert!(what.contains("more than any file can hold"), "{what}");
+    }
+
+    #[test]
+    fn a_string_longer_than_the_rest_of_the_file_is_found() {
+        // A Chunk record whose declared length runs past the file, its compression string
+        // declaring 4 GB: found at the record (the crate would allocate the string first).
+        let mut f = super::super::mcap::MAGIC.to_vec();
+        f.push(0x06);
+        f.extend_from_slice(&(1u64 << 40).to_le_bytes());
+        f.extend_from_slice(&[0; 28]);
+        f.extend_from_slice(&u32::MAX.to_le_bytes());
+        f.extend_from_slice(b"zstd");
+        let (at, what) = first_oversized_field(&f).expect("found");
+        assert_eq!(at, 8);
+        assert!(
+            what.contains("Chunk record's field 5 declares 4294967295 bytes, more than the 4 bytes left"),
+            "{what}"
+        );
     }
 
     #[test]
