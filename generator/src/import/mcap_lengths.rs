@@ -49,14 +49,8 @@ pub fn first_oversized_field(bytes: &[u8]) -> Option<(usize, String)> {
 fn scan(bytes: &[u8], mut at: usize, end: usize, chunk_end: Option<u64>) -> Option<(usize, String)> {
     // Inside a chunk every record must fit in the chunk's records as declared: the `mcap` crate
     // slices past its buffer otherwise (a panic in mcap 0.26's linear reader, found by fuzzing).
-    if let Some(stop) = chunk_end {
-        let left = stop.saturating_sub(at as u64);
-        if (1..9).contains(&left) && at < end {
-            return Some((
-                at,
-                format!("{left} bytes at the end of a chunk's records are no record"),
-            ));
-        }
+    if let Some(found) = stub_before_chunk_end(at, end, chunk_end) {
+        return Some(found);
     }
     while at.checked_add(9).is_some_and(|e| e <= end) {
         let opcode = bytes[at];
@@ -141,17 +135,23 @@ fn scan(bytes: &[u8], mut at: usize, end: usize, chunk_end: Option<u64>) -> Opti
             }
         }
         at = usize::try_from(declared_end).ok()?;
-        if let Some(stop) = chunk_end {
-            let left = stop.saturating_sub(at as u64);
-            if (1..9).contains(&left) && at < end {
-                return Some((
-                    at,
-                    format!("{left} bytes at the end of a chunk's records are no record"),
-                ));
-            }
+        if let Some(found) = stub_before_chunk_end(at, end, chunk_end) {
+            return Some(found);
         }
     }
     None
+}
+
+/// Inside a chunk whose records end at `chunk_end`, a stub of 1–8 bytes at `at` (before `end`): too
+/// short for a record head, so no record.
+fn stub_before_chunk_end(at: usize, end: usize, chunk_end: Option<u64>) -> Option<(usize, String)> {
+    let left = chunk_end?.saturating_sub(at as u64);
+    ((1..9).contains(&left) && at < end).then(|| {
+        (
+            at,
+            format!("{left} bytes at the end of a chunk's records are no record"),
+        )
+    })
 }
 
 /// What is wrong in the records of the zstd-compressed chunk whose body starts at `body`, with its
