@@ -307,18 +307,8 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
             break;
         }
     }
-    for (topic, b) in builders {
-        rec.series.insert(topic, b.series);
-    }
-    for (topic, series) in rec.series.iter() {
-        if let Some(fields) = rec.available.get_mut(topic) {
-            for (f, v) in &series.fields {
-                if !fields.contains(f) && v.iter().any(|x| !x.is_nan()) {
-                    fields.push(f.clone());
-                }
-            }
-        }
-    }
+    rec.take_series(builders);
+    rec.list_carried_fields();
     Ok(rec)
 }
 

@@ -267,9 +267,7 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)]) -> Result<Reco
             |name| values.get(name).copied(),
         )?;
     }
-    for (topic, b) in builders {
-        rec.series.insert(topic, b.series);
-    }
+    rec.take_series(builders);
     for name in instances {
         rec.notes
             .push(format!("`{name}` has several instances: instance 0 is used"));

@@ -124,20 +124,8 @@ pub fn read(file: &str, bytes: &[u8], needs: &[(String, String)], clock: Clock) 
         };
         rec.broken = Some(format!("the file breaks {after}: damaged at byte {at}: {what}"));
     }
-    for (topic, b) in builders {
-        rec.series.insert(topic, b.series);
-    }
-    // A field the schema has but no message carried (an empty sequence) is not listed as
-    // available: the per-topic field list comes from the schema with sequences as `name[i]`.
-    for (topic, series) in rec.series.iter() {
-        if let Some(fields) = rec.available.get_mut(topic) {
-            for (f, v) in &series.fields {
-                if !fields.contains(f) && v.iter().any(|x| !x.is_nan()) {
-                    fields.push(f.clone());
-                }
-            }
-        }
-    }
+    rec.take_series(builders);
+    rec.list_carried_fields();
     Ok(rec)
 }
 

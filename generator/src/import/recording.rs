@@ -193,6 +193,28 @@ impl Recording {
         }
     }
 
+    /// The builders' samples become the recording's series.
+    pub fn take_series(&mut self, builders: BTreeMap<String, SeriesBuilder>) {
+        for (topic, b) in builders {
+            self.series.insert(topic, b.series);
+        }
+    }
+
+    /// For formats whose schema lists a sequence's fields as `name[i]` only as messages carry them:
+    /// a requested field some message carried (a finite sample) joins its topic's available
+    /// fields; one the schema has but no message carried (an empty sequence) is not listed.
+    pub fn list_carried_fields(&mut self) {
+        for (topic, series) in self.series.iter() {
+            if let Some(fields) = self.available.get_mut(topic) {
+                for (f, v) in &series.fields {
+                    if !fields.contains(f) && v.iter().any(|x| !x.is_nan()) {
+                        fields.push(f.clone());
+                    }
+                }
+            }
+        }
+    }
+
     /// Every damaged stretch in one line each (empty: none).
     pub fn damage_report(&self) -> Vec<String> {
         self.damage
