@@ -3,7 +3,7 @@
 //! ([`pd::refine`]; docs/identification.md "Loop refinement").
 
 use super::{stage, IdentifyOptions, Report};
-use crate::identify::dataset::{build, Dataset, DatasetOptions, Targets};
+use crate::identify::dataset::{build_for_free_runs, Dataset, DatasetOptions};
 use crate::identify::excitation::Excitation;
 use crate::identify::pd;
 use crate::identify::preprocess::SavGol;
@@ -37,12 +37,13 @@ pub(super) fn fit(
         let data = if dataset.is_interval_form() {
             Some(dataset)
         } else {
-            match build(
+            // The refinement's free runs read the states, the interval ends and the inputs: the
+            // integral form without its mean slopes.
+            match build_for_free_runs(
                 logs,
                 &DatasetOptions {
                     savgol,
                     response,
-                    targets: Targets::Trapezoid,
                     ..DatasetOptions::default()
                 },
             ) {
