@@ -449,12 +449,17 @@ pub fn identify(logs: Vec<FlightLog>, options: &IdentifyOptions, report: &dyn Re
     if let Some((est, refined)) = &estimate {
         provenance["input_response"] = delays::input_response_json(est, refined.as_ref());
     }
+    // The operating envelope is the logs' last use but PD's integral form: taken now, so that the
+    // logs are dropped before the fit (said after it, as ever).
+    let envelope = envelope::from_logs(&logs.iter().collect::<Vec<&FlightLog>>());
+    let log_count = logs.len();
     // With the loop refinement kept, the sparse fit's own text is the fallback should the refined
     // model fail the horizon check.
     let mut unrefined = None;
     let json = match options.method {
         Method::Sindy => {
-            let fitted = sindy_fit::fit(options, &dataset, logs.len(), provenance, response, &ex, report)?;
+            drop(logs);
+            let fitted = sindy_fit::fit(options, &dataset, log_count, provenance, response, &ex, report)?;
             match sindy_fit::refine_loops(options, &fitted, &dataset, dt, report)? {
                 Some(texts) => {
                     unrefined = texts.fallback;
@@ -464,17 +469,12 @@ pub fn identify(logs: Vec<FlightLog>, options: &IdentifyOptions, report: &dyn Re
             }
         }
         Method::Pd => {
-            let (text, fallback) =
-                pd_fit::fit(options, &logs, &dataset, savgol, response, &ex, dt, provenance, report)?;
+            let (text, fallback) = pd_fit::fit(options, logs, &dataset, savgol, response, &ex, dt, provenance, report)?;
             unrefined = fallback.map(|t| t + "\n");
             text
         }
     } + "\n";
     drop(dataset);
-    let refs: Vec<&FlightLog> = logs.iter().collect();
-    let envelope = envelope::from_logs(&refs);
-    drop(refs);
-    drop(logs);
     if let Some(e) = &envelope {
         report.line(&format!(
             "operating envelope (observed range of the logs, widened): {}",
