@@ -298,3 +298,47 @@ fn interval_segment(
         x_next: x[start + 1..end + 1].to_vec(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::logs::parse_log;
+
+    /// Free runs' integral form is [`build`]'s with `Targets::Trapezoid`, without the slopes.
+    #[test]
+    fn free_runs_form_is_the_integral_form_without_slopes() {
+        let header = "t,x,y,z,roll,pitch,yaw,vx,vy,vz,roll_rate,pitch_rate,yaw_rate,u_vz,u_roll,u_pitch,u_yaw_rate";
+        let mut csv = format!("# rate_hz: 50\n{header}\n");
+        for k in 0..120 {
+            let t = k as f64 / 50.0;
+            let row: Vec<String> = std::iter::once(format!("{t}"))
+                .chain((0..16).map(|c| format!("{:e}", (t * (1.0 + c as f64)).sin() + if c == 2 { 5.0 } else { 0.0 })))
+                .collect();
+            csv.push_str(&row.join(","));
+            csv.push('\n');
+        }
+        let log = parse_log(&csv, "test.csv").unwrap();
+        let options = DatasetOptions {
+            response: Some(InputResponse {
+                delay: [0.04, 0.0, 0.02, 0.0],
+                lag: [Some(0.05), None, None, None],
+            }),
+            ..DatasetOptions::default()
+        };
+        let full = build(
+            std::slice::from_ref(&log),
+            &DatasetOptions {
+                targets: Targets::Trapezoid,
+                ..options.clone()
+            },
+        )
+        .unwrap();
+        let runs = build_for_free_runs(std::slice::from_ref(&log), &options).unwrap();
+        assert!(runs.is_interval_form());
+        assert_eq!(full.segments.len(), runs.segments.len());
+        for (a, b) in full.segments.iter().zip(&runs.segments) {
+            assert!(!a.dx.is_empty() && b.dx.is_empty());
+            assert_eq!((&a.t, &a.x, &a.u, &a.x_next, a.dt), (&b.t, &b.x, &b.u, &b.x_next, b.dt));
+        }
+    }
+}
