@@ -255,7 +255,7 @@ pub fn run(args: IdentifyArgs) -> Result<(), String> {
     for path in &args.logs {
         logs.push(uavgen::logs::load_any(path, args.profile.as_deref()).map_err(|e| e.to_string())?);
     }
-    let identified = pipeline::identify(&logs, &options, &Stderr::default())?;
+    let identified = pipeline::identify(logs, &options, &Stderr::default())?;
     super::write_atomically(&args.out, &identified.json)?;
     println!("wrote {}", args.out.display());
     Ok(())

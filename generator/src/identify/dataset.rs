@@ -134,6 +134,25 @@ pub enum DatasetError {
 
 /// Build the dataset; segments shorter than the window are skipped.
 pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, DatasetError> {
+    build_with(logs, options, true)
+}
+
+/// The integral form ([`Targets::Trapezoid`], whatever `options.targets` says) without its
+/// targets: every segment's `dx` is left empty. What free runs over the sample intervals read
+/// (the states, the interval ends x_{k+1} and the inputs each interval sees), at 96 bytes per
+/// sample less than [`build`]'s.
+pub fn build_for_free_runs(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, DatasetError> {
+    build_with(
+        logs,
+        &DatasetOptions {
+            targets: Targets::Trapezoid,
+            ..options.clone()
+        },
+        false,
+    )
+}
+
+fn build_with(logs: &[FlightLog], options: &DatasetOptions, slopes: bool) -> Result<Dataset, DatasetError> {
     let mut segments = Vec::new();
     for (li, log) in logs.iter().enumerate() {
         for (si, seg) in log.segments.iter().enumerate() {
@@ -149,7 +168,7 @@ pub fn build(logs: &[FlightLog], options: &DatasetOptions) -> Result<Dataset, Da
                 error,
             };
             if options.targets == Targets::Trapezoid {
-                if let Some(data) = interval_segment(li, si, dt, &seg.t, &seg.x, &seg.u, options) {
+                if let Some(data) = interval_segment(li, si, dt, &seg.t, &seg.x, &seg.u, options, slopes) {
                     segments.push(data);
                 }
                 continue;
@@ -239,8 +258,9 @@ fn shifted_inputs(u: &[[f64; 4]], delay: &[f64; 4], dt: f64) -> (Vec<[f64; 4]>, 
 }
 
 /// One segment in the integral form ([`Targets::Trapezoid`]): sample k stands for the interval
-/// [t_k, t_{k+1}], its input is what the interval sees, its target the mean slope. `None` when
-/// the input delays leave no interval.
+/// [t_k, t_{k+1}], its input is what the interval sees, its target the mean slope (with `slopes`;
+/// else `dx` is empty). `None` when the input delays leave no interval.
+#[allow(clippy::too_many_arguments)]
 fn interval_segment(
     log: usize,
     segment: usize,
@@ -249,6 +269,7 @@ fn interval_segment(
     x: &[[f64; 12]],
     u: &[[f64; 4]],
     options: &DatasetOptions,
+    slopes: bool,
 ) -> Option<SegmentData> {
     let (mut u, start) = match &options.response {
         Some(r) => (r.interval_inputs(u, dt), r.warmup(dt)),
@@ -260,6 +281,7 @@ fn interval_segment(
     }
     trim(&mut u, start, end);
     let dx = (start..end)
+        .filter(|_| slopes)
         .map(|k| {
             let h = t[k + 1] - t[k];
             core::array::from_fn(|i| (x[k + 1][i] - x[k][i]) / h)
@@ -275,4 +297,48 @@ fn interval_segment(
         dx,
         x_next: x[start + 1..end + 1].to_vec(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::logs::parse_log;
+
+    /// Free runs' integral form is [`build`]'s with `Targets::Trapezoid`, without the slopes.
+    #[test]
+    fn free_runs_form_is_the_integral_form_without_slopes() {
+        let header = "t,x,y,z,roll,pitch,yaw,vx,vy,vz,roll_rate,pitch_rate,yaw_rate,u_vz,u_roll,u_pitch,u_yaw_rate";
+        let mut csv = format!("# rate_hz: 50\n{header}\n");
+        for k in 0..120 {
+            let t = k as f64 / 50.0;
+            let row: Vec<String> = std::iter::once(format!("{t}"))
+                .chain((0..16).map(|c| format!("{:e}", (t * (1.0 + c as f64)).sin() + if c == 2 { 5.0 } else { 0.0 })))
+                .collect();
+            csv.push_str(&row.join(","));
+            csv.push('\n');
+        }
+        let log = parse_log(&csv, "test.csv").unwrap();
+        let options = DatasetOptions {
+            response: Some(InputResponse {
+                delay: [0.04, 0.0, 0.02, 0.0],
+                lag: [Some(0.05), None, None, None],
+            }),
+            ..DatasetOptions::default()
+        };
+        let full = build(
+            std::slice::from_ref(&log),
+            &DatasetOptions {
+                targets: Targets::Trapezoid,
+                ..options.clone()
+            },
+        )
+        .unwrap();
+        let runs = build_for_free_runs(std::slice::from_ref(&log), &options).unwrap();
+        assert!(runs.is_interval_form());
+        assert_eq!(full.segments.len(), runs.segments.len());
+        for (a, b) in full.segments.iter().zip(&runs.segments) {
+            assert!(!a.dx.is_empty() && b.dx.is_empty());
+            assert_eq!((&a.t, &a.x, &a.u, &a.x_next, a.dt), (&b.t, &b.x, &b.u, &b.x_next, b.dt));
+        }
+    }
 }

@@ -225,12 +225,14 @@ pub fn resample(log: &FlightLog, period: f64) -> Option<(FlightLog, ResampleNote
 /// What `identify` does with a log it has read: the log under the stale-row policy (stale rows
 /// are found on the samples as logged, so before any filtering), then [`resample`]d to
 /// `max_rate_hz` ([`DEFAULT_MAX_RATE_HZ`] by default) if it is at least twice that fast.
+/// The log is taken by value: the stale rows are interpolated in place, and a resampled log
+/// replaces it (no second copy of the rows is held).
 pub fn for_identification(
-    log: &FlightLog,
+    log: FlightLog,
     stale: super::StalePolicy,
     max_rate_hz: f64,
 ) -> (FlightLog, Option<ResampleNote>) {
-    let log = log.with_stale(stale);
+    let log = log.into_stale(stale);
     match resample(&log, 1.0 / max_rate_hz) {
         Some((resampled, note)) => (resampled, Some(note)),
         None => (log, None),
@@ -310,7 +312,7 @@ mod tests {
     fn slow_logs_are_kept() {
         let log = log_at(100.0, 2.0, |t| t);
         assert!(resample(&log, 0.01).is_none());
-        let (same, note) = for_identification(&log, crate::logs::StalePolicy::Keep, DEFAULT_MAX_RATE_HZ);
+        let (same, note) = for_identification(log.clone(), crate::logs::StalePolicy::Keep, DEFAULT_MAX_RATE_HZ);
         assert!(note.is_none());
         assert_eq!(same, log);
     }

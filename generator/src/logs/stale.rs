@@ -39,13 +39,15 @@ impl Segment {
     /// interpolated in time (inputs, time stamps and the battery column unchanged).
     pub fn with_stale(&self, policy: StalePolicy) -> Segment {
         let mut out = self.clone();
-        if policy == StalePolicy::Interpolate {
-            let flags = self.stale_flags();
-            if flags.iter().any(|f| *f) {
-                out.x = destale(&self.t, &self.x, &flags);
-            }
-        }
+        out.apply_stale(policy);
         out
+    }
+
+    /// [`Segment::with_stale`] in place: no copy of the rows.
+    pub fn apply_stale(&mut self, policy: StalePolicy) {
+        if policy == StalePolicy::Interpolate {
+            destale_in_place(&self.t, &mut self.x);
+        }
     }
 }
 
@@ -53,10 +55,15 @@ impl FlightLog {
     /// The log under `policy` (every segment, see [`Segment::with_stale`]); the quality report is
     /// the one of the log as read.
     pub fn with_stale(&self, policy: StalePolicy) -> FlightLog {
-        FlightLog {
-            segments: self.segments.iter().map(|s| s.with_stale(policy)).collect(),
-            ..self.clone()
+        self.clone().into_stale(policy)
+    }
+
+    /// [`FlightLog::with_stale`] of an owned log, in place (no copy of its rows).
+    pub fn into_stale(mut self, policy: StalePolicy) -> FlightLog {
+        for s in &mut self.segments {
+            s.apply_stale(policy);
         }
+        self
     }
 }
 
@@ -84,18 +91,48 @@ pub fn destale(t: &[f64], x: &[[f64; 12]], stale: &[bool]) -> Vec<[f64; 12]> {
         while j < n && stale[j] {
             j += 1;
         }
-        if j < n {
-            let (a, b) = (i - 1, j);
-            for k in i..j {
-                let w = (t[k] - t[a]) / (t[b] - t[a]);
-                for s in 0..12 {
-                    out[k][s] = x[a][s] + w * (x[b][s] - x[a][s]);
-                }
-            }
-        }
+        interpolate_run(t, &mut out, i, j);
         i = j;
     }
     out
+}
+
+/// [`destale`] of the rows [`stale_flags`] finds, in place: each run of stale rows is found on the
+/// rows as logged (the rows after it are not yet touched) and then interpolated between the fresh
+/// rows around it, which are never changed — the same values as [`destale`].
+pub fn destale_in_place(t: &[f64], x: &mut [[f64; 12]]) {
+    let n = x.len();
+    let mut i = 1;
+    while i < n {
+        if x[i] != x[i - 1] {
+            i += 1;
+            continue;
+        }
+        let mut j = i + 1;
+        while j < n && x[j] == x[j - 1] {
+            j += 1;
+        }
+        interpolate_run(t, x, i, j);
+        // Row j ended the run (fresh: compared with row j − 1 as logged); the next run can start
+        // at j + 1 at the earliest, compared with row j, which is never changed.
+        i = j + 1;
+    }
+}
+
+/// Rows i..j (stale, i ≥ 1) linearly interpolated in time between rows i − 1 and j (fresh); a run
+/// that ends the segment (j = n) keeps its held value.
+fn interpolate_run(t: &[f64], x: &mut [[f64; 12]], i: usize, j: usize) {
+    if j >= x.len() {
+        return;
+    }
+    let (a, b) = (i - 1, j);
+    let (xa, xb) = (x[a], x[b]);
+    for k in i..j {
+        let w = (t[k] - t[a]) / (t[b] - t[a]);
+        for s in 0..12 {
+            x[k][s] = xa[s] + w * (xb[s] - xa[s]);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -114,5 +151,36 @@ mod tests {
         let d = destale(&t, &x, &st);
         let v: Vec<f64> = d.iter().map(|r| r[6]).collect();
         assert_eq!(v, vec![0.0, 1.0, 2.0, 3.0, 4.0, 4.0]);
+        let mut y = x;
+        destale_in_place(&t, &mut y);
+        assert_eq!(y.to_vec(), d);
+    }
+
+    /// In place and by copy give the same rows, bit for bit, on random logs with stale runs
+    /// anywhere (the start, the end, runs of one, adjacent runs of different held values).
+    #[test]
+    fn in_place_equals_the_copy() {
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as f64 / (1u64 << 31) as f64
+        };
+        for _ in 0..50 {
+            let n = 1 + (next() * 40.0) as usize;
+            let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.01 + 0.003 * next()).collect();
+            let mut x = vec![[0.0; 12]; n];
+            for k in 0..n {
+                x[k] = if k > 0 && next() < 0.5 {
+                    x[k - 1]
+                } else {
+                    std::array::from_fn(|_| next())
+                };
+            }
+            let copy = destale(&t, &x, &stale_flags(&x));
+            destale_in_place(&t, &mut x);
+            assert_eq!(x, copy);
+        }
     }
 }

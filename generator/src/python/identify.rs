@@ -119,7 +119,7 @@ fn identify(
             lines: RefCell::new(Vec::new()),
             progress,
         };
-        let identified = pipeline::identify(&logs, &options, &report)?;
+        let identified = pipeline::identify(logs, &options, &report)?;
         Ok((identified.json, identified.warnings, report.lines.into_inner()))
     })
     .map_err(|e: String| err(e))

@@ -18,9 +18,9 @@ use super::dataset::Dataset;
 use super::loop_refine::{LoopRefinement, RefineOptions};
 use super::preprocess::{try_columnwise, LowPass, PreprocessError};
 use crate::model::{parse, Model, ModelError, PdFile, FORMAT};
-use nalgebra::{DMatrix, DVector};
 use regressors::{mass_matrix, rotation_rows, thrust_axis, translation_rows, ROTATION_XI, TRANSLATION_XI};
 use serde::Serialize;
+use std::borrow::Cow;
 
 /// Names of the six equation rows, in order.
 pub const ROW_NAMES: [&str; 6] = ["x", "y", "z", "roll", "pitch", "yaw"];
@@ -343,14 +343,46 @@ fn validate(o: &PdFitOptions) -> Result<(), PdFitError> {
     Ok(())
 }
 
-/// One segment's samples as the fit sees them (low-passed if asked).
-struct Samples {
-    x: Vec<[f64; 12]>,
-    u: Vec<[f64; 4]>,
-    dx: Vec<[f64; 12]>,
+/// One segment's samples as the fit sees them: the dataset's own series (borrowed, not copied),
+/// or with a low-pass the filtered copies.
+struct Samples<'a> {
+    x: Cow<'a, [[f64; 12]]>,
+    /// Integral-form data (dataset::Targets::Trapezoid): the interval ends; the fit's state is the
+    /// interval's midpoint ½(x + x_next) (the midpoint rule), formed as the samples are read.
+    x_next: Option<&'a [[f64; 12]]>,
+    u: Cow<'a, [[f64; 4]]>,
+    dx: Cow<'a, [[f64; 12]]>,
 }
 
-fn prepare(dataset: &Dataset, options: &PdFitOptions) -> Result<Vec<Samples>, PdFitError> {
+impl Samples<'_> {
+    fn len(&self) -> usize {
+        self.x.len()
+    }
+}
+
+/// ½(a + b), element by element.
+fn midpoint(a: &[f64; 12], b: &[f64; 12]) -> [f64; 12] {
+    std::array::from_fn(|i| 0.5 * (a[i] + b[i]))
+}
+
+/// Every sample (x, u, ẋ) of `data`, in order.
+fn samples<'s>(data: &'s [Samples<'_>]) -> impl Iterator<Item = ([f64; 12], &'s [f64; 4], &'s [f64; 12])> + 's {
+    data.iter().flat_map(|s| {
+        s.x.iter()
+            .zip(s.u.iter())
+            .zip(s.dx.iter())
+            .enumerate()
+            .map(move |(k, ((x, u), dx))| {
+                let x = match s.x_next {
+                    Some(ends) => midpoint(x, &ends[k]),
+                    None => *x,
+                };
+                (x, u, dx)
+            })
+    })
+}
+
+fn prepare<'a>(dataset: &'a Dataset, options: &PdFitOptions) -> Result<Vec<Samples<'a>>, PdFitError> {
     let mut out = Vec::new();
     for seg in &dataset.segments {
         for (k, ((x, u), dx)) in seg.x.iter().zip(&seg.u).zip(&seg.dx).enumerate() {
@@ -363,22 +395,29 @@ fn prepare(dataset: &Dataset, options: &PdFitOptions) -> Result<Vec<Samples>, Pd
             }
         }
         let n = seg.x.len().min(seg.u.len()).min(seg.dx.len());
-        let (mut x, mut u, mut dx) = (seg.x[..n].to_vec(), seg.u[..n].to_vec(), seg.dx[..n].to_vec());
-        if seg.x_next.len() == seg.x.len() {
-            // The integral form (dataset::Targets::Trapezoid): the interval's mean slope against
-            // the model at the interval's midpoint state (the midpoint rule).
-            for (xm, x1) in x.iter_mut().zip(&seg.x_next) {
-                for (a, b) in xm.iter_mut().zip(x1) {
-                    *a = 0.5 * (*a + b);
+        let x_next = (seg.x_next.len() == seg.x.len()).then(|| &seg.x_next[..n]);
+        let samples = match &options.lowpass {
+            None => Samples {
+                x: Cow::Borrowed(&seg.x[..n]),
+                x_next,
+                u: Cow::Borrowed(&seg.u[..n]),
+                dx: Cow::Borrowed(&seg.dx[..n]),
+            },
+            Some(lp) => {
+                // The low-pass runs over whole series: filtered copies (the midpoints first).
+                let x: Vec<[f64; 12]> = match x_next {
+                    Some(ends) => seg.x[..n].iter().zip(ends).map(|(a, b)| midpoint(a, b)).collect(),
+                    None => seg.x[..n].to_vec(),
+                };
+                Samples {
+                    x: Cow::Owned(try_columnwise(&x, |y| lp.try_apply(y, seg.dt))?),
+                    x_next: None,
+                    u: Cow::Owned(try_columnwise(&seg.u[..n], |y| lp.try_apply(y, seg.dt))?),
+                    dx: Cow::Owned(try_columnwise(&seg.dx[..n], |y| lp.try_apply(y, seg.dt))?),
                 }
             }
-        }
-        if let Some(lp) = &options.lowpass {
-            x = try_columnwise(&x, |y| lp.try_apply(y, seg.dt))?;
-            u = try_columnwise(&u, |y| lp.try_apply(y, seg.dt))?;
-            dx = try_columnwise(&dx, |y| lp.try_apply(y, seg.dt))?;
-        }
-        out.push(Samples { x, u, dx });
+        };
+        out.push(samples);
     }
     Ok(out)
 }
@@ -410,25 +449,25 @@ pub fn bounds(options: &PdFitOptions, k: usize) -> (f64, f64) {
     }
 }
 
-/// Solve one group; `columns` are the ξ of the columns of `a`.
+/// Solve one group from its rows folded into `reduction`; `columns` are the ξ of its columns.
 fn solve_group(
-    a: &DMatrix<f64>,
-    y: &DVector<f64>,
+    reduction: bvls::Reduction,
     columns: &[usize],
     bounds: &impl Fn(usize) -> (f64, f64),
 ) -> Result<(Vec<f64>, Subproblem), PdFitError> {
     let zero: Vec<usize> = (0..columns.len())
-        .filter(|&j| a.column(j).norm() == 0.0)
+        .filter(|&j| reduction.column_norm(j) == 0.0)
         .map(|j| columns[j])
         .collect();
     if !zero.is_empty() {
         return Err(PdFitError::Unidentifiable { xi: zero });
     }
     let (lo, hi): (Vec<f64>, Vec<f64>) = columns.iter().map(|&k| bounds(k)).unzip();
-    let s = bvls::solve(a, y, &lo, &hi);
+    let rows = reduction.rows();
+    let s = bvls::solve_reduced(reduction, &lo, &hi);
     let report = Subproblem {
         xi: columns.to_vec(),
-        rows: a.nrows(),
+        rows,
         condition: s.condition,
         at_bounds: (0..columns.len())
             .filter(|&j| s.at_bound[j])
@@ -447,16 +486,6 @@ const IRLS_TOLERANCE: f64 = 1e-10;
 /// Cap on the reweightings of [`PdWeighting::Acceleration`].
 const MAX_REWEIGHTINGS: usize = 100;
 
-/// One sample's six equation rows.
-struct Block {
-    /// Translational coefficients over [`TRANSLATION_XI`] and targets.
-    t: [[f64; 4]; 3],
-    ty: [f64; 3],
-    /// Rotational coefficients over [`ROTATION_XI`] (target 0).
-    r: [[f64; 12]; 3],
-    b: [f64; 3],
-    omega: [f64; 3],
-}
 /// (m I + ξ11 b e3ᵀ)⁻¹ = (I − ξ11 b e3ᵀ / (m + ξ11 b_z)) / m  (Sherman-Morrison).
 fn translation_weight(m: f64, xi11: f64, b: &[f64; 3]) -> [[f64; 3]; 3] {
     let c = xi11 / (m + xi11 * b[2]);
@@ -489,59 +518,60 @@ struct Group<'a, const N: usize> {
 
 impl<const N: usize> Group<'_, N> {
     /// Bounded least squares over the free ξ of the group, reweighted until `converged` (or once).
+    /// The rows are formed from the samples for every solve and folded into R and Qᵀ y as they
+    /// come ([`bvls::Reduction`]): neither the design matrix nor per-sample rows are held.
     /// Returns all 16 ξ (only this group's are set) and the report.
     fn solve(
         &self,
-        blocks: &[Block],
-        rows: impl Fn(&Block) -> (&[[f64; N]; 3], [f64; 3]),
+        data: &[Samples],
+        rows: impl Fn(&[f64; 12], &[f64; 4], &[f64; 12]) -> ([[f64; N]; 3], [f64; 3]),
         bounds: impl Fn(usize) -> (f64, f64),
-        weight: impl Fn(&Block, &[f64; 16]) -> [[f64; 3]; 3],
+        weight: impl Fn(&[f64; 12], &[f64; 16]) -> [[f64; 3]; 3],
         converged: impl Fn(&[f64; 16], &[f64; 16]) -> bool,
     ) -> Result<([f64; 16], Subproblem), PdFitError> {
         let fixed_value = |k: usize| self.fixed.iter().find(|(f, _)| *f == k).map(|&(_, v)| v);
-        let free: Vec<usize> = (0..N).filter(|&j| fixed_value(self.xi[j]).is_none()).collect();
+        let fixed_column: [Option<f64>; N] = std::array::from_fn(|j| fixed_value(self.xi[j]));
+        let free: Vec<usize> = (0..N).filter(|&j| fixed_column[j].is_none()).collect();
         let free_xi: Vec<usize> = free.iter().map(|&j| self.xi[j]).collect();
-        let per = self.selected.iter().filter(|&&r| r).count();
         let mut current: Option<[f64; 16]> = None;
         let mut reweightings = 0;
+        let mut row = vec![0.0; free.len()];
         loop {
-            let mut a = DMatrix::zeros(blocks.len() * per, free.len());
-            let mut y = DVector::zeros(blocks.len() * per);
-            let mut i = 0;
-            for b in blocks {
-                let (ab, yb) = rows(b);
+            let mut reduction = bvls::Reduction::new(free.len());
+            for (x, u, dx) in samples(data) {
+                let (ab, yb) = rows(&x, u, dx);
                 // Fixed ξ move to the right-hand side.
                 let mut rhs = yb;
                 for r in 0..3 {
                     for j in 0..N {
-                        if let Some(v) = fixed_value(self.xi[j]) {
+                        if let Some(v) = fixed_column[j] {
                             rhs[r] -= ab[r][j] * v;
                         }
                     }
                 }
-                let w = current.as_ref().map(|c| weight(b, c));
+                let w = current.as_ref().map(|c| weight(&x, c));
                 for r in 0..3 {
                     if !self.selected[r] {
                         continue;
                     }
-                    match &w {
+                    let y = match &w {
                         None => {
                             for (c, &j) in free.iter().enumerate() {
-                                a[(i, c)] = ab[r][j];
+                                row[c] = ab[r][j];
                             }
-                            y[i] = rhs[r];
+                            rhs[r]
                         }
                         Some(w) => {
                             for (c, &j) in free.iter().enumerate() {
-                                a[(i, c)] = (0..3).map(|k| w[r][k] * ab[k][j]).sum();
+                                row[c] = (0..3).map(|k| w[r][k] * ab[k][j]).sum();
                             }
-                            y[i] = (0..3).map(|k| w[r][k] * rhs[k]).sum();
+                            (0..3).map(|k| w[r][k] * rhs[k]).sum()
                         }
-                    }
-                    i += 1;
+                    };
+                    reduction.push(&row, y);
                 }
             }
-            let (theta, mut report) = solve_group(&a, &y, &free_xi, &bounds)?;
+            let (theta, mut report) = solve_group(reduction, &free_xi, &bounds)?;
             let mut next = [0.0; 16];
             for (&k, v) in free_xi.iter().zip(&theta) {
                 next[k - 1] = *v;
@@ -633,24 +663,9 @@ pub fn fit_refined(
         return Err(PdFitError::Empty);
     }
     let data = prepare(dataset, options)?;
-    let samples: usize = data.iter().map(|s| s.x.len()).sum();
     let (m, g) = (options.mass, options.gravity);
     let rows = options.rows;
 
-    // Per-sample 3-row blocks; the rows are assembled (weighted, selected) per solve.
-    let mut blocks = Vec::with_capacity(samples);
-    for s in &data {
-        for ((x, u), dx) in s.x.iter().zip(&s.u).zip(&s.dx) {
-            let t = translation_rows(x, u, dx, m, g);
-            blocks.push(Block {
-                t: t.map(|(a, _)| a),
-                ty: t.map(|(_, y)| y),
-                r: rotation_rows(x, u, dx),
-                b: thrust_axis(x[3], x[4], x[5]),
-                omega: [x[3], x[4], x[5]],
-            });
-        }
-    }
     let mut fixed: Vec<(usize, f64)> = options.fixed.clone();
     match &options.scale {
         PdScale::Inertia(i) => fixed.extend([(14, i[0]), (15, i[1]), (16, i[2])]),
@@ -665,10 +680,13 @@ pub fn fit_refined(
         reweight,
     };
     let (xt, translation) = translation_group.solve(
-        &blocks,
-        |b| (&b.t, b.ty),
+        &data,
+        |x, u, dx| {
+            let t = translation_rows(x, u, dx, m, g);
+            (t.map(|(a, _)| a), t.map(|(_, y)| y))
+        },
         bounds,
-        |b, xi| translation_weight(m, xi[10], &b.b),
+        |x, xi| translation_weight(m, xi[10], &thrust_axis(x[3], x[4], x[5])),
         |prev, next| (prev[10] - next[10]).abs() <= IRLS_TOLERANCE * m,
     )?;
     let rotation_group = Group {
@@ -678,10 +696,10 @@ pub fn fit_refined(
         reweight,
     };
     let (xr, rotation) = rotation_group.solve(
-        &blocks,
-        |b| (&b.r, [0.0; 3]),
+        &data,
+        |x, u, dx| (rotation_rows(x, u, dx), [0.0; 3]),
         bounds,
-        |b, xi| rotation_weight(&b.omega, &[xi[13], xi[14], xi[15]], xi[11]),
+        |x, xi| rotation_weight(&[x[3], x[4], x[5]], &[xi[13], xi[14], xi[15]], xi[11]),
         |prev, next| {
             let scale: f64 = next[13..16].iter().sum();
             (11..16).all(|j| (prev[j] - next[j]).abs() <= IRLS_TOLERANCE * scale)
@@ -746,7 +764,7 @@ fn assemble(
     provenance: serde_json::Value,
     loop_refinement: Option<serde_json::Value>,
 ) -> Result<PdFit, PdFitError> {
-    let samples: usize = data.iter().map(|s| s.x.len()).sum();
+    let samples: usize = data.iter().map(Samples::len).sum();
     let (m, g) = (options.mass, options.gravity);
     let row_stats = residuals(data, options, &xi);
     let mut file = PdFile {
@@ -811,24 +829,22 @@ fn residuals(data: &[Samples], options: &PdFitOptions, xi: &[f64; 16]) -> Vec<Ro
     let mut n = 0;
     let t_xi = TRANSLATION_XI.map(|k| xi[k - 1]);
     let r_xi = ROTATION_XI.map(|k| xi[k - 1]);
-    for s in data {
-        for ((x, u), dx) in s.x.iter().zip(&s.u).zip(&s.dx) {
-            n += 1;
-            for (r, (a, y)) in translation_rows(x, u, dx, options.mass, options.gravity)
-                .iter()
-                .enumerate()
-            {
-                let pred: f64 = a.iter().zip(&t_xi).map(|(a, t)| a * t).sum();
-                sum[r] += (y - pred).powi(2);
-                inertial[r] += y * y;
-            }
-            for (r, a) in rotation_rows(x, u, dx).iter().enumerate() {
-                let total: f64 = a.iter().zip(&r_xi).map(|(a, t)| a * t).sum();
-                // Columns 8..12 (ξ12, inertias) carry minus the inertial side.
-                let lhs: f64 = -(8..12).map(|j| a[j] * r_xi[j]).sum::<f64>();
-                sum[3 + r] += total * total;
-                inertial[3 + r] += lhs * lhs;
-            }
+    for (x, u, dx) in samples(data) {
+        n += 1;
+        for (r, (a, y)) in translation_rows(&x, u, dx, options.mass, options.gravity)
+            .iter()
+            .enumerate()
+        {
+            let pred: f64 = a.iter().zip(&t_xi).map(|(a, t)| a * t).sum();
+            sum[r] += (y - pred).powi(2);
+            inertial[r] += y * y;
+        }
+        for (r, a) in rotation_rows(&x, u, dx).iter().enumerate() {
+            let total: f64 = a.iter().zip(&r_xi).map(|(a, t)| a * t).sum();
+            // Columns 8..12 (ξ12, inertias) carry minus the inertial side.
+            let lhs: f64 = -(8..12).map(|j| a[j] * r_xi[j]).sum::<f64>();
+            sum[3 + r] += total * total;
+            inertial[3 + r] += lhs * lhs;
         }
     }
     (0..6)

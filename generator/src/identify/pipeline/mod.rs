@@ -339,17 +339,17 @@ fn constant_log(log: &FlightLog) -> bool {
 }
 
 /// The logs as the fit sees them: each one's quality warnings and stale rows said, the stale
-/// policy applied, then resampled to `max_rate_hz` if at least twice as fast (said, and returned
-/// for the provenance).
+/// policy applied (in place), then resampled to `max_rate_hz` if at least twice as fast (said, and
+/// returned for the provenance).
 fn prepared_logs(
-    logs: &[FlightLog],
+    logs: Vec<FlightLog>,
     stale: StalePolicy,
     max_rate_hz: f64,
     report: &dyn Report,
 ) -> (Vec<FlightLog>, Vec<serde_json::Value>) {
     let mut resampled = Vec::new();
     let logs = logs
-        .iter()
+        .into_iter()
         .map(|log| {
             for w in log.report.warnings() {
                 report.line(&format!("warning: {}: {w}", log.source));
@@ -377,8 +377,10 @@ fn prepared_logs(
 }
 
 /// Identify a model from `logs` (as loaded: [`crate::logs::load_any`]) with `options`: the text
-/// `uavgen identify` writes. Errors are the CLI's messages.
-pub fn identify(logs: &[FlightLog], options: &IdentifyOptions, report: &dyn Report) -> Result<Identified, String> {
+/// `uavgen identify` writes. Errors are the CLI's messages. The logs are taken by value: the stale
+/// rows are interpolated in place and each log is dropped once nothing needs it (docs/identification.md,
+/// "Memory").
+pub fn identify(logs: Vec<FlightLog>, options: &IdentifyOptions, report: &dyn Report) -> Result<Identified, String> {
     options.validate()?;
     let delay_spec = parse_delay_spec(&options.input_delay)?;
     let (logs, resampled) = prepared_logs(logs, options.stale, options.max_rate_hz, report);
@@ -447,12 +449,17 @@ pub fn identify(logs: &[FlightLog], options: &IdentifyOptions, report: &dyn Repo
     if let Some((est, refined)) = &estimate {
         provenance["input_response"] = delays::input_response_json(est, refined.as_ref());
     }
+    // The operating envelope is the logs' last use but PD's integral form: taken now, so that the
+    // logs are dropped before the fit (said after it, as ever).
+    let envelope = envelope::from_logs(&logs.iter().collect::<Vec<&FlightLog>>());
+    let log_count = logs.len();
     // With the loop refinement kept, the sparse fit's own text is the fallback should the refined
     // model fail the horizon check.
     let mut unrefined = None;
     let json = match options.method {
         Method::Sindy => {
-            let fitted = sindy_fit::fit(options, &dataset, logs.len(), provenance, response, &ex, report)?;
+            drop(logs);
+            let fitted = sindy_fit::fit(options, &dataset, log_count, provenance, response, &ex, report)?;
             match sindy_fit::refine_loops(options, &fitted, &dataset, dt, report)? {
                 Some(texts) => {
                     unrefined = texts.fallback;
@@ -462,14 +469,12 @@ pub fn identify(logs: &[FlightLog], options: &IdentifyOptions, report: &dyn Repo
             }
         }
         Method::Pd => {
-            let (text, fallback) =
-                pd_fit::fit(options, &logs, &dataset, savgol, response, &ex, dt, provenance, report)?;
+            let (text, fallback) = pd_fit::fit(options, logs, &dataset, savgol, response, &ex, dt, provenance, report)?;
             unrefined = fallback.map(|t| t + "\n");
             text
         }
     } + "\n";
-    let refs: Vec<&FlightLog> = logs.iter().collect();
-    let envelope = envelope::from_logs(&refs);
+    drop(dataset);
     if let Some(e) = &envelope {
         report.line(&format!(
             "operating envelope (observed range of the logs, widened): {}",
@@ -572,7 +577,7 @@ mod tests {
                 segments: Vec::new(),
             },
         };
-        let e = identify(&[log], &IdentifyOptions::new(Method::Pd, "m"), &Quiet).unwrap_err();
+        let e = identify(vec![log], &IdentifyOptions::new(Method::Pd, "m"), &Quiet).unwrap_err();
         assert!(
             e.starts_with("still.csv: every state and input column is constant"),
             "{e}"

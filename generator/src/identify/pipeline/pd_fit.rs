@@ -3,7 +3,7 @@
 //! ([`pd::refine`]; docs/identification.md "Loop refinement").
 
 use super::{stage, IdentifyOptions, Report};
-use crate::identify::dataset::{build, Dataset, DatasetOptions, Targets};
+use crate::identify::dataset::{build_for_free_runs, Dataset, DatasetOptions};
 use crate::identify::excitation::Excitation;
 use crate::identify::pd;
 use crate::identify::preprocess::SavGol;
@@ -11,11 +11,12 @@ use crate::identify::response::InputResponse;
 use crate::logs::FlightLog;
 
 /// The PD model's text and, when a loop was refined, the equation-error fit's text to fall back
-/// on should the refined model fail the horizon check.
+/// on should the refined model fail the horizon check. The logs are dropped once the loop
+/// refinement's integral form is built from them, before the fit.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn fit(
     options: &IdentifyOptions,
-    logs: &[FlightLog],
+    logs: Vec<FlightLog>,
     dataset: &Dataset,
     savgol: SavGol,
     response: Option<InputResponse>,
@@ -37,12 +38,13 @@ pub(super) fn fit(
         let data = if dataset.is_interval_form() {
             Some(dataset)
         } else {
-            match build(
-                logs,
+            // The refinement's free runs read the states, the interval ends and the inputs: the
+            // integral form without its mean slopes.
+            match build_for_free_runs(
+                &logs,
                 &DatasetOptions {
                     savgol,
                     response,
-                    targets: Targets::Trapezoid,
                     ..DatasetOptions::default()
                 },
             ) {
@@ -62,6 +64,7 @@ pub(super) fn fit(
     } else {
         None
     };
+    drop(logs);
     if let Some((_, refine)) = &refinement {
         report.line(&format!(
             "then refining its attitude loops by simulation error (--refine-loops auto: ξ2, ξ5, ξ8 and ξ3, ξ6, ξ9 on free runs of {} samples every {} samples, at most {} runs, held out by log or block; kept at a {:.0} % held-out gain)",
