@@ -990,3 +990,129 @@ fn build_provenance(
     );
     Value::Object(p)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::dataset::SegmentData;
+
+    /// Two segments of a toy vehicle in the integral form (x_{k+1} from one Euler step of known
+    /// sparse dynamics, plus noise), random states and inputs.
+    fn interval_dataset(n: usize) -> Dataset {
+        let mut seed = 0x2545f4914f6cdd1du64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let dt = 0.02;
+        let segments = (0..2)
+            .map(|s| {
+                let mut seg = SegmentData {
+                    log: s,
+                    dt,
+                    ..Default::default()
+                };
+                for k in 0..n {
+                    let x: [f64; 12] = core::array::from_fn(|i| [5.0, 5.0, 5.0, 0.5, 0.5, 3.0][i % 6] * next());
+                    let u: [f64; 4] = core::array::from_fn(|_| next());
+                    let mut f = [0.0; 12];
+                    f[..6].copy_from_slice(&x[6..]);
+                    f[6] = -0.4 * x[6] + 9.81 * x[4].sin() * x[5].cos();
+                    f[7] = -0.4 * x[7] - 9.81 * x[3].sin() * x[5].cos();
+                    f[8] = 2.0 * u[0] - 2.0 * x[8];
+                    f[9] = 16.0 * (u[1] - x[3]) - 6.0 * x[9];
+                    f[10] = 16.0 * (u[2] - x[4]) - 6.0 * x[10];
+                    f[11] = 3.0 * (u[3] - x[11]);
+                    let x1: [f64; 12] = core::array::from_fn(|i| x[i] + dt * (f[i] + 0.05 * next()));
+                    seg.t.push(k as f64 * dt);
+                    seg.x.push(x);
+                    seg.u.push(u);
+                    seg.dx.push(core::array::from_fn(|i| (x1[i] - x[i]) / dt));
+                    seg.x_next.push(x1);
+                }
+                seg
+            })
+            .collect();
+        Dataset { segments }
+    }
+
+    /// The fit gathered in chunks of 1, 7 and more samples than the data selects the same terms
+    /// with the same coefficients and scores to round-off; with and without the heading-frame pair.
+    #[test]
+    fn the_fit_does_not_depend_on_the_chunk_size() {
+        let data = interval_dataset(150);
+        let n = data.len();
+        for heading_frame in [HeadingFrame::Never, HeadingFrame::Always] {
+            let options = SindyOptions {
+                sweep: Some(vec![0.05, 0.5, 2.0, 8.0]),
+                heading_frame,
+                ..SindyOptions::default()
+            };
+            let fits: Vec<SindyFit> = [1, 7, n + 1]
+                .iter()
+                .map(|&c| fit_in_chunks(&data, &options, "m", Value::Null, &mut |_, _| {}, c).unwrap())
+                .collect();
+            let one_shot = &fits[2];
+            assert_eq!(one_shot.heading_pair.is_some(), heading_frame == HeadingFrame::Always);
+            for f in &fits[..2] {
+                assert_eq!(f.chosen, one_shot.chosen);
+                for (a, b) in f.sweep_coefficients.iter().zip(&one_shot.sweep_coefficients) {
+                    let scale = b.amax().max(1.0);
+                    for (x, y) in a.iter().zip(b.iter()) {
+                        assert_eq!(*x == 0.0, *y == 0.0, "{x} {y}");
+                        assert!((x - y).abs() <= 1e-9 * scale, "{x} {y}");
+                    }
+                }
+                for (a, b) in f.sweep.iter().zip(&one_shot.sweep) {
+                    for (r, s) in a.rows.iter().zip(&b.rows) {
+                        assert!((r.rss - s.rss).abs() <= 1e-9 * s.rss, "{} {}", r.rss, s.rss);
+                        assert!((r.n_ic - s.n_ic).abs() <= 1e-9 * s.n_ic, "{} {}", r.n_ic, s.n_ic);
+                    }
+                }
+            }
+            // The selected model is the toy's: u_vz and vz in the vz row.
+            let vz = one_shot.targets.iter().position(|t| t == "vz").unwrap();
+            let at = |name: &str| one_shot.file.library.iter().position(|t| t == name).unwrap();
+            assert!((one_shot.coefficients[(vz, at("u_vz"))] - 2.0).abs() < 0.05);
+            assert!((one_shot.coefficients[(vz, at("vz"))] + 2.0).abs() < 0.05);
+        }
+    }
+
+    /// The residual sums of squares from the gathered R are the direct sums over the samples.
+    #[test]
+    fn residual_sums_from_r_are_the_direct_ones() {
+        let data = interval_dataset(60);
+        let fit = fit(&data, &SindyOptions::default(), "m", Value::Null).unwrap();
+        let vars: Vec<String> = DEFAULT_STATES
+            .iter()
+            .chain(DEFAULT_INPUTS.iter())
+            .map(|s| s.to_string())
+            .collect();
+        let library = Library::new(fit.file.library.clone(), &vars).unwrap();
+        for (t, state) in fit.targets.iter().enumerate() {
+            let i = DEFAULT_STATES.iter().position(|s| s == state).unwrap();
+            let mut rss = 0.0;
+            for seg in &data.segments {
+                for k in 0..seg.x.len() {
+                    let v: Vec<f64> = seg.x[k].iter().chain(&seg.u[k]).copied().collect();
+                    let e: Vec<f64> = seg.x_next[k].iter().chain(&seg.u[k]).copied().collect();
+                    let pred: f64 = (0..library.len())
+                        .map(|c| {
+                            fit.coefficients[(t, c)]
+                                * (eval_term(&library.terms[c], &v) + eval_term(&library.terms[c], &e))
+                                * 0.5
+                        })
+                        .sum();
+                    rss += (seg.dx[k][i] - pred).powi(2);
+                }
+            }
+            assert!(
+                (fit.rows[t].rss - rss).abs() <= 1e-9 * rss,
+                "{state}: {} {rss}",
+                fit.rows[t].rss
+            );
+        }
+    }
+}
