@@ -305,7 +305,9 @@ impl Row {
             .iter()
             .zip(slot.iter_mut())
             .map(|(seg, slots)| {
-                let mut table = Vec::new();
+                // Its exact size (a growing vector would hold up to twice the table).
+                let covered = slots.iter().filter(|s| **s != u32::MAX).count();
+                let mut table = Vec::with_capacity(covered * RK4_POINTS.len() * columns);
                 let mut next = 0u32;
                 for (k, sl) in slots.iter_mut().enumerate() {
                     if *sl == u32::MAX {

@@ -718,6 +718,9 @@ struct LibraryState {
     chunk: usize,
 }
 
+/// What a pass gives each chunk: `(candidate, segment, fold, rows of [Θ, y])`.
+type Visit<'v> = dyn FnMut(usize, usize, usize, DMatrixView<f64>) + 'v;
+
 /// Residuals' autocorrelation sums c_l = Σ e_i e_{i−l}, l = 0 … 200, within each segment, pooled
 /// (what [`effective_count`] sums), one residual at a time.
 struct AutoCorr {
@@ -834,7 +837,7 @@ impl LibraryState {
         row: usize,
         cands: &[InputResponse],
         cols: &[usize],
-        visit: &mut dyn FnMut(usize, usize, usize, DMatrixView<f64>),
+        visit: &mut Visit,
     ) {
         let p = lib.library.len() + 1;
         let mut z = DMatrix::zeros(self.chunk, p);
