@@ -305,7 +305,9 @@ impl Row {
             .iter()
             .zip(slot.iter_mut())
             .map(|(seg, slots)| {
-                let mut table = Vec::new();
+                // Its exact size (a growing vector would hold up to twice the table).
+                let covered = slots.iter().filter(|s| **s != u32::MAX).count();
+                let mut table = Vec::with_capacity(covered * RK4_POINTS.len() * columns);
                 let mut next = 0u32;
                 for (k, sl) in slots.iter_mut().enumerate() {
                     if *sl == u32::MAX {
@@ -430,8 +432,9 @@ impl Row {
         }
     }
 
-    /// The free-run residuals at `theta` (into `r`, as [`Row::residuals`]) and the Gauss–Newton
-    /// matrices of their Jacobian J = ∂r/∂θ: (JᵀJ, Jᵀr).
+    /// The free-run residuals at `theta` (into `r` if given, as [`Row::residuals`]; their sum of
+    /// squares is returned, summed in their order, so they need not be held) and the Gauss–Newton
+    /// matrices of their Jacobian J = ∂r/∂θ: (JᵀJ, Jᵀr, Σ r²).
     ///
     /// J is exact for the discrete runs: forward sensitivities S = ∂(output, rate)/∂θ carried
     /// through every RK4 stage alongside the state. The rate ṙ = Σ θ_i φ_i(v) is linear in θ, so
@@ -445,14 +448,17 @@ impl Row {
         data: &Dataset,
         windows: &[Window],
         h: usize,
-        r: &mut Vec<f64>,
-    ) -> (DMatrix<f64>, DVector<f64>) {
-        r.clear();
+        mut r: Option<&mut Vec<f64>>,
+    ) -> (DMatrix<f64>, DVector<f64>, f64) {
+        if let Some(r) = r.as_mut() {
+            r.clear();
+        }
         let p = self.terms.len();
         let mut jtj = DMatrix::zeros(p, p);
         let mut jtr = DVector::zeros(p);
+        let mut sse = -0.0;
         if p == 0 {
-            return (jtj, jtr);
+            return (jtj, jtr, sse);
         }
         let sums = self.fixed_sums(theta);
         let angle = self.lp.has_angle();
@@ -555,7 +561,10 @@ impl Row {
                 }
                 let jrow: &[f64] = if angle { &sa } else { &sr };
                 let res = if angle { s[0] } else { s[1] } - seg.x_next[k][output];
-                r.push(res);
+                if let Some(r) = r.as_mut() {
+                    r.push(res);
+                }
+                sse += res * res;
                 for (i, &ji) in jrow.iter().enumerate() {
                     jr[i] += ji * res;
                     for (u, jk) in upper[i * p + i..(i + 1) * p].iter_mut().zip(&jrow[i..]) {
@@ -571,7 +580,7 @@ impl Row {
                 jtj[(k, i)] = upper[i * p + k];
             }
         }
-        (jtj, jtr)
+        (jtj, jtr, sse)
     }
 
     fn cost(&self, theta: &[f64], data: &Dataset, windows: &[Window], h: usize, buf: &mut Vec<f64>) -> f64 {
@@ -594,17 +603,10 @@ impl Row {
         if windows.is_empty() || p == 0 {
             return theta;
         }
-        let mut r = Vec::new();
-        let sse = |r: &[f64]| -> f64 {
-            let c: f64 = r.iter().map(|r| r * r).sum();
-            if c.is_finite() {
-                c
-            } else {
-                f64::INFINITY
-            }
-        };
-        let (mut a, mut g) = self.residuals_jacobian(&theta, data, windows, h, &mut r);
-        let mut cost = sse(&r);
+        // The runs' sum of squares (the residuals are not held: their number is windows × horizon).
+        let finite = |c: f64| if c.is_finite() { c } else { f64::INFINITY };
+        let (mut a, mut g, c0) = self.residuals_jacobian(&theta, data, windows, h, None);
+        let mut cost = finite(c0);
         if !cost.is_finite() {
             return theta;
         }
@@ -633,8 +635,8 @@ impl Row {
                     continue;
                 };
                 let trial: Vec<f64> = theta.iter().zip(delta.iter()).map(|(t, d)| t + d).collect();
-                let (at, gt) = self.residuals_jacobian(&trial, data, windows, h, &mut r);
-                let c = sse(&r);
+                let (at, gt, c) = self.residuals_jacobian(&trial, data, windows, h, None);
+                let c = finite(c);
                 if c < cost {
                     let fall = (cost - c) / cost;
                     theta = trial;
@@ -1026,7 +1028,8 @@ mod tests {
             let theta = row.internal(&theta);
             let p = theta.len();
             let mut r = Vec::new();
-            let (jtj, jtr) = row.residuals_jacobian(&theta, &data, &windows, h, &mut r);
+            let (jtj, jtr, sse) = row.residuals_jacobian(&theta, &data, &windows, h, Some(&mut r));
+            assert_eq!(sse.to_bits(), r.iter().map(|v| v * v).sum::<f64>().to_bits());
             let mut plain = Vec::new();
             row.residuals(&theta, &data, &windows, h, &mut plain);
             assert_eq!(r.len(), plain.len());

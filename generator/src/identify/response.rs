@@ -40,7 +40,8 @@
 use super::sindy::{eval_term, Library, LibraryKind};
 use crate::model::Base;
 use crate::model::{DEFAULT_INPUTS, DEFAULT_STATES};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DMatrixView, DVector};
+use std::borrow::Cow;
 
 /// The input channels (LOG_FORMAT.md order) and the rows they drive.
 pub const INPUTS: [&str; 4] = ["u_vz", "u_roll", "u_pitch", "u_yaw_rate"];
@@ -160,33 +161,76 @@ impl Default for ScanOptions {
 }
 
 /// One uniformly sampled segment, whole (not trimmed): states, inputs as logged, and the
-/// Savitzky-Golay derivatives; `log` is the index of its log, `h` the filter's half window.
+/// Savitzky-Golay derivatives; `log` is the index of its log, `h` the filter's half window. The
+/// series are borrowed from the logs where they can be ([`ScanSegment::interval_of`]): the scan
+/// holds no copy of them.
 #[derive(Clone, Debug)]
-pub struct ScanSegment {
+pub struct ScanSegment<'a> {
     pub log: usize,
     pub dt: f64,
     pub h: usize,
-    pub x: Vec<[f64; 12]>,
-    pub u: Vec<[f64; 4]>,
-    pub dx: Vec<[f64; 12]>,
+    pub x: Cow<'a, [[f64; 12]]>,
+    pub u: Cow<'a, [[f64; 4]]>,
+    /// The targets. Empty in the integral form of [`ScanSegment::interval_of`]: the interval's
+    /// mean slope (x_{k+1} − x_k)/(t_{k+1} − t_k), computed where it is used.
+    pub dx: Cow<'a, [[f64; 12]]>,
     /// Integral-form data (`dataset::Targets::Trapezoid`): x_{k+1} per sample, `dx` the interval's
     /// mean slope and `h` 0; the regressors are then the trapezoid means over [t_k, t_{k+1}] with
     /// the inputs the interval sees. Empty: Savitzky-Golay derivatives at the samples.
-    pub x_next: Vec<[f64; 12]>,
+    pub x_next: Cow<'a, [[f64; 12]]>,
+    /// With `dx` empty: the sample times (one more than the samples of `x`).
+    pub t: Cow<'a, [f64]>,
 }
 
-impl ScanSegment {
+impl<'a> ScanSegment<'a> {
+    /// The integral form of one log segment (times `t`, states `x`, inputs `u`, borrowed): sample k
+    /// stands for the interval [t_k, t_{k+1}] — what `dataset::build` makes of it with
+    /// `Targets::Trapezoid` and no input response, without copying it. `None` with fewer than two
+    /// samples.
+    pub fn interval_of(log: usize, dt: f64, t: &'a [f64], x: &'a [[f64; 12]], u: &'a [[f64; 4]]) -> Option<Self> {
+        let end = t.len().min(x.len()).min(u.len()).saturating_sub(1);
+        if end == 0 {
+            return None;
+        }
+        Some(Self {
+            log,
+            dt,
+            h: 0,
+            x: Cow::Borrowed(&x[..end]),
+            u: Cow::Borrowed(&u[..end]),
+            dx: Cow::Borrowed(&[]),
+            x_next: Cow::Borrowed(&x[1..=end]),
+            t: Cow::Borrowed(&t[..=end]),
+        })
+    }
+
     fn interval(&self) -> bool {
         !self.x_next.is_empty()
     }
 
+    /// The target of state `row` at sample k.
+    fn target(&self, k: usize, row: usize) -> f64 {
+        if self.dx.is_empty() {
+            (self.x_next[k][row] - self.x[k][row]) / (self.t[k + 1] - self.t[k])
+        } else {
+            self.dx[k][row]
+        }
+    }
+
     /// The input regressors of `r` paired with this segment's targets.
+    #[cfg(test)]
     fn inputs(&self, r: &InputResponse) -> Vec<[f64; 4]> {
         if self.interval() {
             r.interval_inputs(&self.u, self.dt)
         } else {
             r.regressors(&self.u, self.dt)
         }
+    }
+
+    /// [`ScanSegment::inputs`] one sample at a time (the same numbers).
+    fn input_stream(&self, r: &InputResponse) -> InputStream<'_> {
+        let offset = if self.interval() { 0.0 } else { 0.5 };
+        InputStream::new(&self.u, self.dt, r, offset)
     }
 
     /// The loop regressor of sample k (the trapezoid mean in the integral form; it is linear in x).
@@ -419,7 +463,7 @@ fn with_channel(r: &InputResponse, j: usize, delay: f64, lag: Option<f64>) -> In
 }
 
 struct Scanner<'a> {
-    segments: &'a [ScanSegment],
+    segments: &'a [ScanSegment<'a>],
     folded: Folded,
     options: &'a ScanOptions,
 }
@@ -435,9 +479,9 @@ impl Scanner<'_> {
             if rows.is_empty() {
                 continue;
             }
-            let u = s.inputs(r);
+            let mut u = s.input_stream(r);
             for &(k, f) in rows {
-                g.add(f, &s.loop_regressor(k, &u[k]), s.dx[k][row]);
+                g.add(f, &s.loop_regressor(k, &u.at(k)), s.target(k, row));
             }
         }
         g
@@ -578,79 +622,152 @@ impl LibraryScan {
         }
         sse
     }
+}
 
-    /// The all-data residuals' effective sample count (`state` set to the response first).
-    fn n_eff(&self, state: &mut LibraryState, sc: &Scanner, r: &InputResponse) -> f64 {
-        state.set(sc, self, r);
-        let mut total = state.gram[0].clone() * 0.0;
-        for g in &state.gram {
-            total += g;
-        }
-        let theta = Self::solve(&total);
-        let terms = theta.len();
-        let residuals: Vec<Vec<f64>> = state
-            .place
-            .iter()
-            .map(|rows| {
-                rows.iter()
-                    .map(|&(f, i)| {
-                        let z = &state.z[f];
-                        let fit: f64 = (0..terms).map(|c| theta[c] * z[(i, c)]).sum();
-                        z[(i, terms)] - fit
-                    })
-                    .collect()
+/// Rows per chunk of the scan's passes: 1024 rows of the 68 columns [Θ, y] are 0.56 MB. A count
+/// of samples, not of seconds: it changes nothing but round-off.
+const SCAN_CHUNK: usize = 1024;
+
+/// The inputs of a response one sample at a time: what [`InputResponse::transform`] gives for the
+/// whole series (per channel the delayed zero-order hold, [`crate::ir::corrections::delayed`], then
+/// the lag's interval average, [`crate::ir::corrections::channel_average`]), the same operations
+/// in the same order, without the series.
+struct InputStream<'a> {
+    u: &'a [[f64; 4]],
+    /// The next sample.
+    k: usize,
+    /// Per channel: the whole samples and fraction of the delay (`None`: no delay), the lag's
+    /// a = e^{−Δt/τ} and (τ/Δt)(1 − a), and the lag state.
+    shift: [Option<(usize, f64)>; 4],
+    lag: [Option<(f64, f64)>; 4],
+    state: [f64; 4],
+    last: [f64; 4],
+}
+
+impl<'a> InputStream<'a> {
+    fn new(u: &'a [[f64; 4]], dt: f64, r: &InputResponse, offset: f64) -> Self {
+        let shift = core::array::from_fn(|j| {
+            let delay = r.delay[j] + offset * dt;
+            (delay > 0.0).then(|| {
+                let samples = delay / dt;
+                let n = samples.floor() as usize;
+                (n, samples - n as f64)
             })
-            .collect();
-        effective_count(&residuals)
+        });
+        let lag = core::array::from_fn(|j| r.lag[j].map(|tau| ((-dt / tau).exp(), -(tau / dt) * (-dt / tau).exp_m1())));
+        Self {
+            u,
+            k: 0,
+            shift,
+            lag,
+            state: [0.0; 4],
+            last: [0.0; 4],
+        }
+    }
+
+    /// The inputs at sample `k` (`k` never decreasing from one call to the next).
+    fn at(&mut self, k: usize) -> [f64; 4] {
+        while self.k <= k {
+            let m = self.k;
+            for j in 0..4 {
+                let v = match self.shift[j] {
+                    None => self.u[m][j],
+                    Some((n, alpha)) => {
+                        (1.0 - alpha) * self.u[m.saturating_sub(n)][j] + alpha * self.u[m.saturating_sub(n + 1)][j]
+                    }
+                };
+                self.last[j] = match self.lag[j] {
+                    None => v,
+                    Some((a, gain)) => {
+                        if m == 0 {
+                            self.state[j] = v;
+                        }
+                        let s = self.state[j];
+                        self.state[j] = a * s + (1.0 - a) * v;
+                        v + (s - v) * gain
+                    }
+                };
+            }
+            self.k += 1;
+        }
+        self.last
     }
 }
 
-/// The per-fold library matrices [Θ, y] of one driven row (fold f's rows in segment order) and
-/// their Gram matrices, for the input response `resp`.
+/// The per-fold Gram matrices of [Θ, y] of one driven row for the input response `resp` — the
+/// library's rows are streamed chunk by chunk, never held (docs/identification.md, "Memory").
 ///
 /// The scan tries one channel's delays and lags at a time, and only the library terms of that
-/// input change with them (for u_roll 11 of the 67 columns): [`LibraryState::set`] recomputes
-/// those columns and their rows and columns of the Gram matrices, each entry the same dot product
-/// of two columns that `tr_mul` computes, so the matrices are the same numbers as rebuilding
-/// everything for every candidate, at a sixth of the cost.
+/// input change with them (for u_roll 11 of the 67 columns). A batch of candidates is scored in
+/// one pass over the samples ([`LibraryState::pass`]): per chunk of rows the library at `resp` is
+/// evaluated once, and per candidate only the changed columns (a column m(x)·u_j as m, evaluated
+/// once per chunk, times the candidate's u_j) and their rows of the Gram matrices against every
+/// column. Each column holds the same numbers as the whole library matrix evaluated for the
+/// candidate; the Gram matrices differ from that matrix's only by the order of summation.
 struct LibraryState {
     /// The target's state index.
     row: usize,
     resp: InputResponse,
-    /// Per segment: the inputs of `resp` (what [`ScanSegment::inputs`] gives).
-    inputs: Vec<Vec<[f64; 4]>>,
-    /// Per fold: samples × (terms + 1), the last column the target.
-    z: Vec<DMatrix<f64>>,
     gram: Vec<DMatrix<f64>>,
-    /// Per segment, per used row: (fold, row of that fold's matrix).
-    place: Vec<Vec<(usize, usize)>>,
     /// Per input channel: the library columns whose term uses it.
     uses: [Vec<usize>; 4],
     /// Per library column of the form m(x)·u_j (u_j to the first power, last or with one other
-    /// factor): per segment, per used row, m at the interval's two ends (at the sample only, for
-    /// derivative targets); `None` for other columns. The term is then m·u_j, the same product
-    /// [`eval_term`] forms, without evaluating m (a sine, a cosine) again for every candidate.
-    multiplier: Vec<Option<Vec<Vec<[f64; 2]>>>>,
+    /// factor, no other input): j. The term is then m·u_j, the same product [`eval_term`] forms.
+    simple: Vec<Option<usize>>,
+    /// Rows per chunk.
+    chunk: usize,
+}
+
+/// What a pass gives each chunk: `(candidate, segment, fold, rows of [Θ, y])`.
+type Visit<'v> = dyn FnMut(usize, usize, usize, DMatrixView<f64>) + 'v;
+
+/// Residuals' autocorrelation sums c_l = Σ e_i e_{i−l}, l = 0 … 200, within each segment, pooled
+/// (what [`effective_count`] sums), one residual at a time.
+struct AutoCorr {
+    c: Vec<f64>,
+    recent: std::collections::VecDeque<f64>,
+    segment: Option<usize>,
+    n: usize,
+}
+
+impl AutoCorr {
+    fn new() -> Self {
+        Self {
+            c: vec![0.0; 201],
+            recent: std::collections::VecDeque::with_capacity(201),
+            segment: None,
+            n: 0,
+        }
+    }
+
+    fn push(&mut self, segment: usize, e: f64) {
+        if self.segment != Some(segment) {
+            self.recent.clear();
+            self.segment = Some(segment);
+        }
+        if self.recent.len() == 201 {
+            self.recent.pop_back();
+        }
+        self.recent.push_front(e);
+        for (l, past) in self.recent.iter().enumerate() {
+            self.c[l] += e * past;
+        }
+        self.n += 1;
+    }
+
+    /// N / (1 + 2 Σ ρ_k) of [`effective_count`].
+    fn count(&self) -> f64 {
+        n_over_tau(self.n, &self.c)
+    }
 }
 
 impl LibraryState {
     fn new(lib: &LibraryScan, sc: &Scanner, r: &InputResponse, row: usize) -> Self {
+        Self::with_chunk(lib, sc, r, row, SCAN_CHUNK)
+    }
+
+    fn with_chunk(lib: &LibraryScan, sc: &Scanner, r: &InputResponse, row: usize, chunk: usize) -> Self {
         let p = lib.library.len() + 1;
-        let folds = sc.folded.folds;
-        let mut counts = vec![0usize; folds];
-        let place: Vec<Vec<(usize, usize)>> = sc
-            .folded
-            .rows
-            .iter()
-            .map(|rows| {
-                rows.iter()
-                    .map(|&(_, f)| {
-                        counts[f] += 1;
-                        (f, counts[f] - 1)
-                    })
-                    .collect()
-            })
-            .collect();
         let uses: [Vec<usize>; 4] = core::array::from_fn(|j| {
             lib.library
                 .terms
@@ -666,19 +783,7 @@ impl LibraryState {
                 .map(|(c, _)| c)
                 .collect()
         });
-        let inputs: Vec<Vec<[f64; 4]>> = sc.segments.iter().map(|s| s.inputs(r)).collect();
-        let mut z: Vec<DMatrix<f64>> = counts.iter().map(|&n| DMatrix::zeros(n, p)).collect();
-        for ((s, rows), (u, at)) in sc.segments.iter().zip(&sc.folded.rows).zip(inputs.iter().zip(&place)) {
-            for (&(k, _), &(f, i)) in rows.iter().zip(at) {
-                let m = &mut z[f];
-                for (c, t) in lib.library.terms.iter().enumerate() {
-                    m[(i, c)] = s.term(t, k, &u[k]);
-                }
-                m[(i, p - 1)] = s.dx[k][row];
-            }
-        }
-        let gram = z.iter().map(|m| m.tr_mul(m)).collect();
-        let multiplier = (0..lib.library.len())
+        let simple = (0..lib.library.len())
             .map(|c| {
                 let t = &lib.library.terms[c];
                 let j = (0..4).find(|j| uses[*j].contains(&c))?;
@@ -689,149 +794,216 @@ impl LibraryState {
                 let simple = t.factors[at].1 == 1
                     && (t.factors.len() <= 2 || at + 1 == t.factors.len())
                     && (0..4).filter(|i| uses[*i].contains(&c)).count() == 1;
-                if !simple {
-                    return None;
-                }
-                Some(
-                    sc.segments
-                        .iter()
-                        .zip(&sc.folded.rows)
-                        .map(|(s, rows)| {
-                            rows.iter()
-                                .map(|&(k, _)| {
-                                    let mut v = [0.0; 16];
-                                    v[..12].copy_from_slice(&s.x[k]);
-                                    v[12 + j] = 1.0;
-                                    let m0 = eval_term(t, &v);
-                                    let m1 = if s.interval() {
-                                        v[..12].copy_from_slice(&s.x_next[k]);
-                                        eval_term(t, &v)
-                                    } else {
-                                        0.0
-                                    };
-                                    [m0, m1]
-                                })
-                                .collect()
-                        })
-                        .collect(),
-                )
+                simple.then_some(j)
             })
             .collect();
-        Self {
+        let mut state = Self {
             row,
             resp: *r,
-            inputs,
-            z,
-            gram,
-            place,
+            gram: vec![DMatrix::zeros(p, p); sc.folded.folds],
             uses,
-            multiplier,
-        }
+            simple,
+            chunk: chunk.max(1),
+        };
+        let all: Vec<usize> = (0..p).collect();
+        let blocks = state.blocks(sc, lib, row, &[*r], &all);
+        state.gram = blocks.into_iter().next().unwrap_or_default();
+        state
     }
 
-    /// Make the target column that of state `row`.
-    fn set_row(&mut self, sc: &Scanner, row: usize) {
-        if row == self.row {
-            return;
-        }
-        for ((s, rows), at) in sc.segments.iter().zip(&sc.folded.rows).zip(&self.place) {
-            for (&(k, _), &(f, i)) in rows.iter().zip(at) {
-                let m = &mut self.z[f];
-                let c = m.ncols() - 1;
-                m[(i, c)] = s.dx[k][row];
-            }
-        }
-        for (m, g) in self.z.iter().zip(self.gram.iter_mut()) {
-            let a = m.ncols() - 1;
-            for b in 0..m.ncols() {
-                let v = m.column(a).dot(&m.column(b));
-                g[(a, b)] = v;
-                g[(b, a)] = v;
-            }
-        }
-        self.row = row;
-    }
-
-    /// Make the matrices those of the response `r` (see the type's documentation).
-    fn set(&mut self, sc: &Scanner, lib: &LibraryScan, r: &InputResponse) {
-        let changed: Vec<usize> = (0..4)
-            .filter(|&j| r.delay[j] != self.resp.delay[j] || r.lag[j] != self.resp.lag[j])
+    /// The library columns that change from `self.resp` to any of `cands`.
+    fn changed_columns(&self, cands: &[InputResponse]) -> Vec<usize> {
+        let mut cols: Vec<usize> = (0..4)
+            .filter(|&j| {
+                cands
+                    .iter()
+                    .any(|r| r.delay[j] != self.resp.delay[j] || r.lag[j] != self.resp.lag[j])
+            })
+            .flat_map(|j| self.uses[j].iter().copied())
             .collect();
-        if changed.is_empty() {
-            return;
-        }
-        let mut cols: Vec<usize> = changed.iter().flat_map(|&j| self.uses[j].iter().copied()).collect();
         cols.sort_unstable();
         cols.dedup();
-        for (s, (u, rows)) in sc.segments.iter().zip(self.inputs.iter_mut().zip(&sc.folded.rows)) {
+        cols
+    }
+
+    /// One pass over the used rows, chunk by chunk (rows of one segment and one fold): for every
+    /// candidate response of `cands`, the rows of [Θ, y] (the target that of state `row`) with the
+    /// columns `cols` under the candidate's inputs and the others under `self.resp`'s, given to
+    /// `visit(candidate, segment, fold, rows)`.
+    fn pass(
+        &self,
+        sc: &Scanner,
+        lib: &LibraryScan,
+        row: usize,
+        cands: &[InputResponse],
+        cols: &[usize],
+        visit: &mut Visit,
+    ) {
+        let p = lib.library.len() + 1;
+        let mut z = DMatrix::zeros(self.chunk, p);
+        let mut zc = DMatrix::zeros(self.chunk, p);
+        let mut mult = vec![[0.0; 2]; self.chunk * cols.len()];
+        for (si, (s, rows)) in sc.segments.iter().zip(&sc.folded.rows).enumerate() {
             if rows.is_empty() {
                 continue;
             }
-            let offset = if s.interval() { 0.0 } else { 0.5 };
-            for &j in &changed {
-                let col: Vec<f64> = s.u.iter().map(|v| v[j]).collect();
-                let seen = interval_average(&col, s.dt, r.delay[j] + offset * s.dt, r.lag[j]);
-                for (o, v) in u.iter_mut().zip(seen) {
-                    o[j] = v;
+            let mut base = s.input_stream(&self.resp);
+            let mut streams: Vec<InputStream> = cands.iter().map(|r| s.input_stream(r)).collect();
+            let mut at = 0;
+            while at < rows.len() {
+                let f = rows[at].1;
+                let mut len = 1;
+                while at + len < rows.len() && len < self.chunk && rows[at + len].1 == f {
+                    len += 1;
                 }
-            }
-        }
-        for (si, ((s, rows), (u, at))) in sc
-            .segments
-            .iter()
-            .zip(&sc.folded.rows)
-            .zip(self.inputs.iter().zip(&self.place))
-            .enumerate()
-        {
-            for &c in &cols {
-                let t = &lib.library.terms[c];
-                let j = (0..4).find(|j| self.uses[*j].contains(&c)).unwrap_or(0);
-                match &self.multiplier[c] {
-                    Some(mult) => {
-                        for ((&(k, _), &(f, i)), m) in rows.iter().zip(at).zip(&mult[si]) {
-                            let uj = u[k][j];
-                            self.z[f][(i, c)] = if s.interval() {
-                                0.5 * (m[0] * uj + m[1] * uj)
+                let chunk = &rows[at..at + len];
+                at += len;
+                for (i, &(k, _)) in chunk.iter().enumerate() {
+                    let u = base.at(k);
+                    for (c, t) in lib.library.terms.iter().enumerate() {
+                        z[(i, c)] = s.term(t, k, &u);
+                    }
+                    z[(i, p - 1)] = s.target(k, row);
+                    for (ci, &c) in cols.iter().enumerate() {
+                        if let (Some(j), Some(t)) = (self.simple.get(c).copied().flatten(), lib.library.terms.get(c)) {
+                            let mut v = [0.0; 16];
+                            v[..12].copy_from_slice(&s.x[k]);
+                            v[12 + j] = 1.0;
+                            let m0 = eval_term(t, &v);
+                            let m1 = if s.interval() {
+                                v[..12].copy_from_slice(&s.x_next[k]);
+                                eval_term(t, &v)
                             } else {
-                                m[0] * uj
+                                0.0
+                            };
+                            mult[i * cols.len() + ci] = [m0, m1];
+                        }
+                    }
+                }
+                for (cand, stream) in streams.iter_mut().enumerate() {
+                    zc.rows_mut(0, len).copy_from(&z.rows(0, len));
+                    for (i, &(k, _)) in chunk.iter().enumerate() {
+                        let u = stream.at(k);
+                        for (ci, &c) in cols.iter().enumerate() {
+                            if c + 1 == p {
+                                continue;
+                            }
+                            let t = &lib.library.terms[c];
+                            zc[(i, c)] = match self.simple[c] {
+                                Some(j) => {
+                                    let [m0, m1] = mult[i * cols.len() + ci];
+                                    let uj = u[j];
+                                    if s.interval() {
+                                        0.5 * (m0 * uj + m1 * uj)
+                                    } else {
+                                        m0 * uj
+                                    }
+                                }
+                                None => s.term(t, k, &u),
                             };
                         }
                     }
-                    None => {
-                        for (&(k, _), &(f, i)) in rows.iter().zip(at) {
-                            self.z[f][(i, c)] = s.term(t, k, &u[k]);
-                        }
-                    }
+                    visit(cand, si, f, zc.rows(0, len));
                 }
             }
         }
-        let mut updated = vec![false; self.z.first().map_or(0, |m| m.ncols())];
-        for (m, g) in self.z.iter().zip(self.gram.iter_mut()) {
-            updated.iter_mut().for_each(|u| *u = false);
-            for &a in &cols {
-                updated[a] = true;
-                for b in 0..m.ncols() {
-                    // (b, a) of an updated b is already there: the same products summed the same way.
-                    if b != a && updated[b] {
-                        continue;
+    }
+
+    /// Per candidate, per fold: the rows `cols` of the Gram matrix of [Θ, y] (each against every
+    /// column), the columns `cols` under the candidate's inputs (see [`LibraryState::pass`]).
+    fn blocks(
+        &self,
+        sc: &Scanner,
+        lib: &LibraryScan,
+        row: usize,
+        cands: &[InputResponse],
+        cols: &[usize],
+    ) -> Vec<Vec<DMatrix<f64>>> {
+        let p = lib.library.len() + 1;
+        let mut out = vec![vec![DMatrix::zeros(cols.len(), p); sc.folded.folds]; cands.len()];
+        self.pass(sc, lib, row, cands, cols, &mut |cand, _, f, z| {
+            let sel = z.select_columns(cols);
+            out[cand][f].gemm_tr(1.0, &sel, &z, 1.0);
+        });
+        out
+    }
+
+    /// The Gram matrices with the rows and columns `cols` replaced by `blocks` (per fold).
+    fn replaced(&self, blocks: &[DMatrix<f64>], cols: &[usize]) -> Vec<DMatrix<f64>> {
+        self.gram
+            .iter()
+            .zip(blocks)
+            .map(|(g, b)| {
+                let mut g = g.clone();
+                for (ia, &a) in cols.iter().enumerate() {
+                    for c in 0..g.ncols() {
+                        g[(a, c)] = b[(ia, c)];
+                        g[(c, a)] = b[(ia, c)];
                     }
-                    let v = m.column(a).dot(&m.column(b));
-                    g[(a, b)] = v;
-                    g[(b, a)] = v;
                 }
-            }
+                g
+            })
+            .collect()
+    }
+
+    /// Make the state that of the target of state `row` and the response `r` (one pass over the
+    /// columns that change).
+    fn move_to(&mut self, sc: &Scanner, lib: &LibraryScan, row: usize, r: &InputResponse) {
+        let mut cols = self.changed_columns(&[*r]);
+        if row != self.row {
+            cols.push(lib.library.len());
         }
+        if cols.is_empty() {
+            return;
+        }
+        let blocks = self.blocks(sc, lib, row, &[*r], &cols);
+        self.gram = self.replaced(&blocks[0], &cols);
+        self.row = row;
         self.resp = *r;
     }
 
-    /// The per-fold Gram matrices of [Θ, y] with the inputs of `r`.
-    fn grams(&mut self, sc: &Scanner, lib: &LibraryScan, r: &InputResponse) -> &[DMatrix<f64>] {
-        self.set(sc, lib, r);
-        &self.gram
+    /// Every candidate's per-fold Gram matrices, one pass for all (candidates that differ from
+    /// the state's response in the same channels: the scan's batches).
+    fn candidate_grams(&self, sc: &Scanner, lib: &LibraryScan, cands: &[InputResponse]) -> Vec<Vec<DMatrix<f64>>> {
+        let cols = self.changed_columns(cands);
+        self.blocks(sc, lib, self.row, cands, &cols)
+            .iter()
+            .map(|b| self.replaced(b, &cols))
+            .collect()
+    }
+
+    /// The held-out SSE of every candidate ([`LibraryScan::cv_sse`]).
+    fn scores(&self, sc: &Scanner, lib: &LibraryScan, cands: &[InputResponse]) -> Vec<f64> {
+        let cols = self.changed_columns(cands);
+        self.blocks(sc, lib, self.row, cands, &cols)
+            .iter()
+            .map(|b| LibraryScan::cv_sse(&self.replaced(b, &cols)))
+            .collect()
+    }
+
+    /// The all-data residuals' effective sample count under the response `r`.
+    fn n_eff(&self, sc: &Scanner, lib: &LibraryScan, r: &InputResponse) -> f64 {
+        let grams = self.candidate_grams(sc, lib, &[*r]).remove(0);
+        let mut total = grams[0].clone() * 0.0;
+        for g in &grams {
+            total += g;
+        }
+        let theta = LibraryScan::solve(&total);
+        let terms = theta.len();
+        let cols = self.changed_columns(&[*r]);
+        let mut acf = AutoCorr::new();
+        self.pass(sc, lib, self.row, &[*r], &cols, &mut |_, si, _, z| {
+            for i in 0..z.nrows() {
+                let fit: f64 = (0..terms).map(|c| theta[c] * z[(i, c)]).sum();
+                acf.push(si, z[(i, terms)] - fit);
+            }
+        });
+        acf.count()
     }
 }
 
 /// N / (1 + 2 Σ ρ_k), ρ summed while positive up to lag 200, pooled over segments.
+#[cfg(test)]
 fn effective_count(residuals: &[Vec<f64>]) -> f64 {
     let n: usize = residuals.iter().map(Vec::len).sum();
     let mut c = vec![0.0; 201];
@@ -842,6 +1014,11 @@ fn effective_count(residuals: &[Vec<f64>]) -> f64 {
             }
         }
     }
+    n_over_tau(n, &c)
+}
+
+/// N / (1 + 2 Σ ρ_k) of the autocorrelation sums `c` (ρ_k = c_k / c_0, summed while positive).
+fn n_over_tau(n: usize, c: &[f64]) -> f64 {
     if n == 0 || c[0] <= 0.0 {
         return n as f64;
     }
@@ -921,7 +1098,7 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
 
     let mut cur = InputResponse::default();
     let mut channels: Vec<Option<ChannelEstimate>> = vec![None; 4];
-    let state = std::cell::RefCell::new(LibraryState::new(&lib, &sc, &cur, DRIVEN_ROW[0]));
+    let mut state = LibraryState::new(&lib, &sc, &cur, DRIVEN_ROW[0]);
     for _pass in 0..options.passes.max(1) {
         for j in 0..4 {
             let row = DRIVEN_ROW[j];
@@ -929,19 +1106,22 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
                 channels[j] = Some(silent_channel(j));
                 continue;
             }
-            state.borrow_mut().set_row(&sc, row);
-            let score = |d: f64, l: Option<f64>| {
-                LibraryScan::cv_sse(state.borrow_mut().grams(&sc, &lib, &with_channel(&cur, j, d, l)))
+            state.move_to(&sc, &lib, row, &cur);
+            // Candidates are scored in batches, one pass over the samples each.
+            let scores = |cands: &[(f64, Option<f64>)]| -> Vec<f64> {
+                let r: Vec<InputResponse> = cands.iter().map(|&(d, l)| with_channel(&cur, j, d, l)).collect();
+                state.scores(&sc, &lib, &r)
             };
             // Delays without a lag.
-            let curve: Vec<(f64, f64)> = delays.iter().map(|&d| (d, score(d, None))).collect();
+            let no_lag: Vec<(f64, Option<f64>)> = delays.iter().map(|&d| (d, None)).collect();
+            let curve: Vec<(f64, f64)> = delays.iter().copied().zip(scores(&no_lag)).collect();
             let sse0 = curve[0].1;
             let (d_best, sse_best) = curve
                 .iter()
                 .copied()
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .unwrap_or((0.0, sse0));
-            let n_eff = lib.n_eff(&mut state.borrow_mut(), &sc, &with_channel(&cur, j, d_best, None));
+            let n_eff = state.n_eff(&sc, &lib, &with_channel(&cur, j, d_best, None));
             let evidence = n_eff * (sse0 / sse_best).ln();
             let mut note = None;
             let mut refused = None;
@@ -972,18 +1152,21 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
                 within.iter().cloned().fold(delay, f64::max),
             );
             // A lag: its response time τ is taken from the delay (d' ≈ d − τ, ±1 step).
-            let mut lag_best: Option<(f64, f64, f64)> = None;
+            let mut lag_cands: Vec<(f64, Option<f64>)> = Vec::new();
             for &tau in &options.lags {
                 let centre = ((delay - tau) / step).round();
                 for k in [centre - 1.0, centre, centre + 1.0] {
                     if k < 0.0 {
                         continue;
                     }
-                    let d = k * step;
-                    let v = score(d, Some(tau));
-                    if lag_best.map_or(true, |b| v < b.2) {
-                        lag_best = Some((d, tau, v));
-                    }
+                    lag_cands.push((k * step, Some(tau)));
+                }
+            }
+            let mut lag_best: Option<(f64, f64, f64)> = None;
+            for (&(d, tau), v) in lag_cands.iter().zip(scores(&lag_cands)) {
+                let tau = tau.unwrap_or(0.0);
+                if lag_best.map_or(true, |b| v < b.2) {
+                    lag_best = Some((d, tau, v));
                 }
             }
             let h_none = sc.horizon_rmse(&with_channel(&cur, j, 0.0, None), j);
@@ -1012,19 +1195,32 @@ pub fn estimate(segments: &[ScanSegment], options: &ScanOptions) -> Result<Respo
                     lag = Some(tau);
                     delay = d;
                     sse_chosen = v;
+                    // The lags near the best and the delays near its delay, in one batch.
+                    let ds: Vec<f64> = (-3..=3).map(|k| d + k as f64 * step).filter(|&x| x >= 0.0).collect();
+                    let batch: Vec<(f64, Option<f64>)> = options
+                        .lags
+                        .iter()
+                        .map(|&t| (d, Some(t)))
+                        .chain(ds.iter().map(|&x| (x, Some(tau))))
+                        .collect();
+                    let sse = scores(&batch);
+                    let (sse_lags, sse_ds) = sse.split_at(options.lags.len());
                     let near: Vec<f64> = options
                         .lags
                         .iter()
-                        .copied()
-                        .filter(|&t| n_eff * (score(d, Some(t)) / v).ln() <= 1.0)
+                        .zip(sse_lags)
+                        .filter(|(_, &e)| n_eff * (e / v).ln() <= 1.0)
+                        .map(|(&t, _)| t)
                         .collect();
                     lag_range = Some((
                         near.iter().cloned().fold(tau, f64::min),
                         near.iter().cloned().fold(tau, f64::max),
                     ));
-                    let ds: Vec<f64> = (-3..=3)
-                        .map(|k| d + k as f64 * step)
-                        .filter(|&x| x >= 0.0 && n_eff * (score(x, Some(tau)) / v).ln() <= 1.0)
+                    let ds: Vec<f64> = ds
+                        .iter()
+                        .zip(sse_ds)
+                        .filter(|(_, &e)| n_eff * (e / v).ln() <= 1.0)
+                        .map(|(&x, _)| x)
                         .collect();
                     delay_range = (
                         ds.iter().cloned().fold(d, f64::min),
@@ -1093,7 +1289,7 @@ mod tests {
 
     /// A vehicle of first- and second-order loops, simulated finely with zero-order-hold commands
     /// delayed by `delay` per channel, logged at 30 Hz, differentiated like the dataset does.
-    fn synthetic(delay: [f64; 4], seconds: f64, seed: u64) -> ScanSegment {
+    fn synthetic(delay: [f64; 4], seconds: f64, seed: u64) -> ScanSegment<'static> {
         use crate::identify::preprocess::{columnwise, SavGol};
         use rand::{Rng, SeedableRng};
         let dt = 1.0 / 30.0;
@@ -1149,25 +1345,26 @@ mod tests {
             log: 0,
             dt,
             h: 4,
-            x: xs,
-            u,
-            dx,
-            x_next: Vec::new(),
+            x: xs.into(),
+            u: u.into(),
+            dx: dx.into(),
+            x_next: Vec::new().into(),
+            t: Vec::new().into(),
         }
     }
 
     /// The same segment in the integral form (what `identify` scans by default).
-    fn interval_form(s: ScanSegment) -> ScanSegment {
+    fn interval_form(s: ScanSegment<'static>) -> ScanSegment<'static> {
         let n = s.x.len() - 1;
-        let dx = (0..n)
+        let dx: Vec<[f64; 12]> = (0..n)
             .map(|k| std::array::from_fn(|i| (s.x[k + 1][i] - s.x[k][i]) / s.dt))
             .collect();
         ScanSegment {
             h: 0,
-            x_next: s.x[1..].to_vec(),
-            x: s.x[..n].to_vec(),
-            u: s.u[..n].to_vec(),
-            dx,
+            x_next: s.x[1..].to_vec().into(),
+            x: s.x[..n].to_vec().into(),
+            u: s.u[..n].to_vec().into(),
+            dx: dx.into(),
             ..s
         }
     }
@@ -1237,15 +1434,53 @@ mod tests {
         assert_eq!(samples(0.0, 0.01), 1);
     }
 
-    /// The scan's incremental update (only one channel's columns and Gram rows recomputed) gives
-    /// the same matrices, bit for bit, as building them afresh for the response; derivative and
-    /// integral form, with delays and a lag.
+    /// The per-fold Gram matrices of [Θ, y] built directly: the whole library matrix of each fold
+    /// (its rows in segment order) for the response `r`, then ZᵀZ.
+    fn direct_grams(sc: &Scanner, lib: &LibraryScan, r: &InputResponse, row: usize) -> Vec<DMatrix<f64>> {
+        let p = lib.library.len() + 1;
+        let mut rows: Vec<Vec<Vec<f64>>> = vec![Vec::new(); sc.folded.folds];
+        for (s, used) in sc.segments.iter().zip(&sc.folded.rows) {
+            let u = s.inputs(r);
+            for &(k, f) in used {
+                let mut z: Vec<f64> = lib.library.terms.iter().map(|t| s.term(t, k, &u[k])).collect();
+                z.push(s.target(k, row));
+                rows[f].push(z);
+            }
+        }
+        rows.iter()
+            .map(|rs| {
+                let z = DMatrix::from_fn(rs.len(), p, |i, c| rs[i][c]);
+                z.tr_mul(&z)
+            })
+            .collect()
+    }
+
+    fn assert_grams_near(a: &[DMatrix<f64>], b: &[DMatrix<f64>], what: &str) {
+        for (x, y) in a.iter().zip(b) {
+            for i in 0..x.nrows() {
+                for j in 0..x.ncols() {
+                    let scale = (y[(i, i)] * y[(j, j)]).sqrt().max(y[(i, j)].abs()).max(1e-300);
+                    assert!(
+                        (x[(i, j)] - y[(i, j)]).abs() <= 1e-12 * scale,
+                        "{what} ({i},{j}): {} against {}",
+                        x[(i, j)],
+                        y[(i, j)]
+                    );
+                }
+            }
+        }
+    }
+
+    /// The scan's streamed Gram matrices (chunks of 1, 7 and more rows than the data; the state
+    /// moved channel by channel, candidates in batches) are the ones of the whole library matrix
+    /// built directly, to round-off; derivative and integral form, with delays and lags.
     #[test]
-    fn updated_library_matrices_are_the_rebuilt_ones() {
+    fn streamed_library_grams_are_the_direct_ones() {
         for seg in [
             synthetic([0.1, 0.05, 0.0, 0.2], 8.0, 3),
             interval_form(synthetic([0.1, 0.05, 0.0, 0.2], 8.0, 4)),
         ] {
+            let n = seg.x.len();
             let segments = [seg];
             let options = ScanOptions::default();
             let (folded, _) = fold_rows(&segments, &options);
@@ -1255,29 +1490,74 @@ mod tests {
                 options: &options,
             };
             let lib = LibraryScan::new(&[]);
-            let mut state = LibraryState::new(&lib, &sc, &InputResponse::default(), 9);
-            let steps = [
-                (1, 0.05, None),
-                (1, 0.0625, Some(0.04)),
-                (3, 0.2, None),
-                (0, 0.1, Some(0.1)),
-            ];
-            let mut r = InputResponse::default();
-            for (j, d, l) in steps {
-                r = with_channel(&r, j, d, l);
-                for row in [9, 8] {
-                    state.set_row(&sc, row);
-                    let grams: Vec<DMatrix<f64>> = state.grams(&sc, &lib, &r).to_vec();
-                    let fresh = LibraryState::new(&lib, &sc, &r, row);
-                    for (a, b) in grams.iter().zip(&fresh.gram) {
-                        assert!(a.iter().zip(b.iter()).all(|(x, y)| x.to_bits() == y.to_bits()));
+            for chunk in [1, 7, n + 1] {
+                let mut state = LibraryState::with_chunk(&lib, &sc, &InputResponse::default(), 9, chunk);
+                assert_grams_near(
+                    &state.gram,
+                    &direct_grams(&sc, &lib, &InputResponse::default(), 9),
+                    "initial",
+                );
+                let steps = [
+                    (1, 0.05, None),
+                    (1, 0.0625, Some(0.04)),
+                    (3, 0.2, None),
+                    (0, 0.1, Some(0.1)),
+                ];
+                let mut r = InputResponse::default();
+                for (j, d, l) in steps {
+                    // A batch of candidates of channel j, then the state moved to the first.
+                    let cands: Vec<InputResponse> = [(d, l), (d + 0.02, None), (0.0, Some(0.3))]
+                        .iter()
+                        .map(|&(d, l)| with_channel(&r, j, d, l))
+                        .collect();
+                    let grams = state.candidate_grams(&sc, &lib, &cands);
+                    for (c, g) in cands.iter().zip(&grams) {
+                        assert_grams_near(g, &direct_grams(&sc, &lib, c, state.row), "candidate");
                     }
-                    for (a, b) in state.z.iter().zip(&fresh.z) {
-                        assert!(a.iter().zip(b.iter()).all(|(x, y)| x.to_bits() == y.to_bits()));
+                    r = cands[0];
+                    for row in [9, 8] {
+                        state.move_to(&sc, &lib, row, &r);
+                        assert_grams_near(&state.gram, &direct_grams(&sc, &lib, &r, row), "moved");
                     }
                 }
             }
         }
+    }
+
+    /// The inputs one sample at a time are the whole-series transform's, bit for bit; the
+    /// streamed autocorrelation sums give [`effective_count`]'s count, bit for bit.
+    #[test]
+    fn streamed_inputs_and_autocorrelation_are_the_whole_series_ones() {
+        let seg = synthetic([0.0; 4], 4.0, 9);
+        for r in [
+            InputResponse::default(),
+            InputResponse {
+                delay: [0.1, 0.0, 0.05, 0.21],
+                lag: [None, Some(0.07), Some(0.3), None],
+            },
+        ] {
+            for offset in [0.0, 0.5] {
+                let whole = r.transform(&seg.u, seg.dt, offset);
+                let mut stream = InputStream::new(&seg.u, seg.dt, &r, offset);
+                for (k, w) in whole.iter().enumerate().skip(3) {
+                    let got = stream.at(k);
+                    assert!(got.iter().zip(w).all(|(a, b)| a.to_bits() == b.to_bits()), "{k}");
+                }
+            }
+        }
+        let e: Vec<Vec<f64>> = vec![
+            (0..500)
+                .map(|i| ((i as f64) * 0.1).sin() + 0.01 * (i % 7) as f64)
+                .collect(),
+            (0..50).map(|i| ((i as f64) * 0.3).cos()).collect(),
+        ];
+        let mut acf = AutoCorr::new();
+        for (s, series) in e.iter().enumerate() {
+            for &v in series {
+                acf.push(s, v);
+            }
+        }
+        assert_eq!(acf.count().to_bits(), effective_count(&e).to_bits());
     }
 
     #[test]

@@ -78,29 +78,29 @@ fn estimate_response(
     savgol: SavGol,
     ex: &Excitation,
 ) -> Result<response::ResponseEstimate, String> {
-    let whole = build(
-        logs,
-        &DatasetOptions {
-            savgol,
-            trim_edges: false,
-            targets: Targets::Trapezoid,
-            ..DatasetOptions::default()
-        },
-    )
-    .map_err(|e| e.to_string())?;
-    let segments: Vec<ScanSegment> = whole
-        .segments
-        .into_iter()
-        .map(|s| ScanSegment {
-            log: s.log,
-            dt: s.dt,
-            h: 0,
-            x: s.x,
-            u: s.u,
-            dx: s.dx,
-            x_next: s.x_next,
-        })
-        .collect();
+    // The logs' segments as `dataset::build` takes them with the integral targets and no input
+    // response (long enough for the Savitzky-Golay window; sample k the interval [t_k, t_{k+1}]),
+    // borrowed, not copied (docs/identification.md, "Memory").
+    let mut segments = Vec::new();
+    for (li, log) in logs.iter().enumerate() {
+        for seg in &log.segments {
+            if seg.t.len() < savgol.window.max(3) {
+                continue;
+            }
+            let mut steps: Vec<f64> = seg.t.windows(2).map(|w| w[1] - w[0]).collect();
+            steps.sort_by(|a, b| a.total_cmp(b));
+            let dt = steps[steps.len() / 2];
+            segments.extend(ScanSegment::interval_of(li, dt, &seg.t, &seg.x, &seg.u));
+        }
+    }
+    if segments.is_empty() {
+        return Err(format!(
+            "{}: no segment is long enough for the Savitzky-Golay window {} and the input delays (the longest has {} samples)",
+            logs.iter().map(|l| l.source.as_str()).collect::<Vec<_>>().join(", "),
+            savgol.window,
+            logs.iter().flat_map(|l| &l.segments).map(|s| s.t.len()).max().unwrap_or(0)
+        ));
+    }
     let options = ScanOptions {
         silent: ex.silent(),
         excluded_vars: ex.excluded_vars(),

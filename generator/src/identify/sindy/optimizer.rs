@@ -13,6 +13,7 @@
 //! The thresholds therefore act on the coefficients of the *normalised* columns when
 //! `normalize_columns` is set. See `docs/sindy.md`.
 
+use super::accumulate::{of_matrix, LsData, CHUNK_ROWS};
 use nalgebra::{DMatrix, DVector};
 use serde_json::{json, Value};
 
@@ -224,19 +225,20 @@ pub fn regress(
     Prepared::new(theta, y, normalize_columns)?.regress(optimizer)
 }
 
-/// What every regression on one (Θ, Ẏ) shares, computed once: the normalised Θ and its column
-/// norms, the least-squares initial guess (its non-zero pattern for STLSQ), ΘᵀΘ and ΘᵀẎ, and the
+/// What every regression on one (Θ, Ẏ) shares, computed once: the normal equations of the
+/// normalised Θ (ΘᵀΘ and ΘᵀẎ) and its column norms, the triangular factor of Θ and Qᵀ Ẏ (every
+/// least-squares solve), the least-squares initial guess (its non-zero pattern for STLSQ), and the
 /// unbiasing refits by support.
 ///
-/// A sparsity sweep regresses the same data with many thresholds; each of these is a pass over
-/// all N samples (the QR factorisation of the initial guess alone costs 2Np² flops), and several
-/// thresholds give a row the same support, hence the same unbiased refit. [`Prepared::regress`]
-/// computes these once per data set instead of once per sweep value, each by the same operations
-/// in the same order (so the same bits); STLSQ takes its initial guess's non-zero pattern from the
-/// normal equations ([`Prepared::init_pattern`], the same pattern).
+/// It is built from an [`LsData`] (the rows of [Θ | Ẏ] gathered chunk by chunk: the library is
+/// never held as an N × p matrix; [`super::accumulate`]), or from matrices ([`Prepared::new`]).
+/// A sparsity sweep regresses the same data with many thresholds; several thresholds give a row
+/// the same support, hence the same unbiased refit, computed once. STLSQ takes its initial
+/// guess's non-zero pattern from the normal equations ([`Prepared::init_pattern`], the same
+/// pattern).
 pub struct Prepared {
-    x: DMatrix<f64>,
-    y: DMatrix<f64>,
+    /// Samples.
+    n: usize,
     norms: DVector<f64>,
     normalize_columns: bool,
     /// The least-squares initial guess: SR3 starts from it; STLSQ only compares its non-zero
@@ -248,9 +250,10 @@ pub struct Prepared {
     xty: DMatrix<f64>,
     /// The unbiased refit of target t on a support (the normalised columns' coefficients).
     unbiased: std::collections::HashMap<(usize, Vec<usize>), Vec<f64>>,
-    /// One QR factorisation of the normalised library for every unbiased refit: R (p × p) and the
-    /// first p rows of Qᵀ Ẏ (see [`Prepared::refit`]). Computed when first needed.
-    qr: Option<(DMatrix<f64>, DMatrix<f64>)>,
+    /// The R factor of the normalised library (p × p) and the first p rows of Qᵀ Ẏ (see
+    /// [`Prepared::refit`]).
+    r: DMatrix<f64>,
+    qty: DMatrix<f64>,
 }
 
 impl Prepared {
@@ -259,30 +262,42 @@ impl Prepared {
         if theta.nrows() != y.nrows() {
             return Err(OptimizerError::Shape(theta.nrows(), y.nrows()));
         }
-        if theta.nrows() == 0 {
+        let both = DMatrix::from_fn(theta.nrows(), theta.ncols() + y.ncols(), |i, j| {
+            if j < theta.ncols() {
+                theta[(i, j)]
+            } else {
+                y[(i, j - theta.ncols())]
+            }
+        });
+        Self::from_data(&of_matrix(&both, CHUNK_ROWS), theta.ncols(), normalize_columns)
+    }
+
+    /// The shared parts of the data gathered in `data`: [Θ | Ẏ], the first `p` columns Θ.
+    pub fn from_data(data: &LsData, p: usize, normalize_columns: bool) -> Result<Self, OptimizerError> {
+        if data.n == 0 {
             return Err(OptimizerError::Empty);
         }
-        if theta.iter().chain(y.iter()).any(|v| !v.is_finite()) {
+        if !data.finite {
             return Err(OptimizerError::NonFinite);
         }
-        let p = theta.ncols();
-        let mut x = theta.clone();
+        let m = data.gram.nrows();
+        let t = m - p;
         let mut norms = DVector::from_element(p, 1.0);
         if normalize_columns {
             for j in 0..p {
-                let n = x.column(j).norm();
-                if n == 0.0 {
+                let n = data.gram[(j, j)].sqrt();
+                if n == 0.0 || !data.nonzero[j] {
                     return Err(OptimizerError::ZeroColumn(j));
                 }
                 norms[j] = n;
-                x.column_mut(j).unscale_mut(n);
             }
         }
-        let gram = x.transpose() * &x;
-        let xty = x.transpose() * y;
+        let gram = DMatrix::from_fn(p, p, |i, j| data.gram[(i, j)] / norms[i] / norms[j]);
+        let xty = DMatrix::from_fn(p, t, |i, c| data.gram[(i, p + c)] / norms[i]);
+        let r = DMatrix::from_fn(p, p, |i, j| data.r[(i, j)] / norms[j]);
+        let qty = DMatrix::from_fn(p, t, |i, c| data.r[(i, p + c)]);
         Ok(Self {
-            x,
-            y: y.clone(),
+            n: data.n,
             norms,
             normalize_columns,
             init: None,
@@ -290,41 +305,28 @@ impl Prepared {
             gram,
             xty,
             unbiased: std::collections::HashMap::new(),
-            qr: None,
+            r,
+            qty,
         })
     }
 
     /// The least-squares refit of target `t` on the normalised columns `support` (coefficients
-    /// in the support's order): what `lstsq(x_S, y_t)` solves. With Θ = Q R (one Householder QR of
-    /// the N × p library per data set, when N ≥ p), ‖Θ_S w − y‖² = ‖R_S w − (Qᵀy)₁..ₚ‖² + a
-    /// constant, so each support is solved on the p × k columns S of R instead of a fresh QR of
-    /// the N × k columns of Θ: the same problem, its rank test and fallback on the same numbers
-    /// (R_S has Θ_S's singular values; the tolerance is taken at N rows as `lstsq`'s), equal up to
-    /// round-off. A sweep refits one support per distinct (target, support) of its thresholds, so
-    /// this replaces tens of N × k factorisations by one.
+    /// in the support's order): what `lstsq(x_S, y_t)` solves. With Θ = Q R (gathered chunk by
+    /// chunk, [`super::accumulate`]), ‖Θ_S w − y‖² = ‖R_S w − (Qᵀy)₁..ₚ‖² + a constant, so each
+    /// support is solved on the p × k columns S of R instead of the N × k columns of Θ: the same
+    /// problem, its rank test and fallback on the same numbers (R_S has Θ_S's singular values; the
+    /// tolerance is taken at N rows as `lstsq`'s), equal up to round-off.
     fn refit(&mut self, t: usize, support: &[usize]) -> Vec<f64> {
-        let (n, p) = self.x.shape();
-        if n < p {
-            let xs = self.x.select_columns(support);
-            let ys = DMatrix::from_column_slice(n, 1, self.y.column(t).as_slice());
-            return lstsq(&xs, &ys).column(0).iter().copied().collect();
-        }
-        let (x, y) = (&self.x, &self.y);
-        let (r, qty) = self.qr.get_or_insert_with(|| {
-            let qr = x.clone().qr();
-            let mut qty = y.clone();
-            qr.q_tr_mul(&mut qty);
-            (qr.r(), qty.rows(0, p).into_owned())
-        });
-        let rs = r.select_columns(support);
-        let rhs = DMatrix::from_column_slice(p, 1, qty.column(t).as_slice());
-        lstsq_at(&rs, &rhs, n).column(0).iter().copied().collect()
+        let p = self.r.nrows();
+        let rs = self.r.select_columns(support);
+        let rhs = DMatrix::from_column_slice(p, 1, self.qty.column(t).as_slice());
+        lstsq_at(&rs, &rhs, self.n).column(0).iter().copied().collect()
     }
 
-    /// The initial guess lstsq(x, y), features × targets (Householder QR: 2Np² flops).
+    /// The initial guess lstsq(x, y), features × targets (on R and Qᵀ Ẏ).
     fn init(&mut self) -> &DMatrix<f64> {
-        let (x, y) = (&self.x, &self.y);
-        self.init.get_or_insert_with(|| lstsq(x, y))
+        let (r, qty, n) = (&self.r, &self.qty, self.n);
+        self.init.get_or_insert_with(|| lstsq_at(r, qty, n))
     }
 
     /// What STLSQ needs of the initial guess: which entries are non-zero. `STLSQ._reduce` uses the
@@ -343,7 +345,7 @@ impl Prepared {
     /// The regression with `optimizer` (what [`regress`] returns for the same data).
     pub fn regress(&mut self, optimizer: &Optimizer) -> Result<Regression, OptimizerError> {
         optimizer.validate()?;
-        let p = self.x.ncols();
+        let p = self.gram.ncols();
         let (mut coef, iterations, converged, unbias) = match *optimizer {
             Optimizer::Stlsq {
                 threshold,
@@ -589,6 +591,16 @@ fn sr3(
 mod tests {
     use super::*;
 
+    /// Θ with unit-norm columns.
+    fn normalised(theta: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut x = theta.clone();
+        for mut c in x.column_iter_mut() {
+            let n = c.norm();
+            c.unscale_mut(n);
+        }
+        x
+    }
+
     /// The unbiased refits on one QR of the library are `lstsq` on the support's columns up to
     /// round-off, also where the support is rank deficient (a repeated column: the minimum-norm
     /// solution by the SVD fallback on both ways).
@@ -613,10 +625,11 @@ mod tests {
             (1.0 + c as f64) * t.sin() - 0.5 * (1.7 * t).cos() + 0.2 * (0.2 * t).sin() + noise
         });
         let mut prepared = Prepared::new(&theta, &y, true).unwrap();
+        let x = normalised(&theta);
         for support in [vec![1], vec![1, 2], vec![0, 2, 5, 6], vec![1, 3, 4], (0..7).collect()] {
             for t in 0..2 {
-                let xs = prepared.x.select_columns(&support);
-                let ys = DMatrix::from_column_slice(n, 1, prepared.y.column(t).as_slice());
+                let xs = x.select_columns(&support);
+                let ys = DMatrix::from_column_slice(n, 1, y.column(t).as_slice());
                 let want = lstsq(&xs, &ys);
                 let got = prepared.refit(t, &support);
                 let scale = want.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
@@ -678,7 +691,7 @@ mod tests {
         }
         // STLSQ from the QR least-squares guess (PySINDy's) and from the normal equations' pattern
         // reaches the same coefficients in the same passes.
-        let qr_guess = lstsq(&prepared.x, &prepared.y);
+        let qr_guess = lstsq(&normalised(&theta), &y);
         let pattern = prepared.init_pattern().clone();
         for threshold in [0.0, 0.01, 0.05, 0.1, 0.5, 1.0, 5.0] {
             let a = stlsq(&prepared.gram, &prepared.xty, &qr_guess, threshold, 1e-3, 20);
