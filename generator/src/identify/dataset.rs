@@ -152,16 +152,25 @@ pub fn build_for_free_runs(logs: &[FlightLog], options: &DatasetOptions) -> Resu
     )
 }
 
+/// The rule by which the fit (and the delay scan, `pipeline::delays`) takes a segment: long enough
+/// for the Savitzky-Golay window of `window` samples (and at least 3); then its step, the median
+/// of t_{k+1} − t_k.
+pub(crate) fn usable_step(t: &[f64], window: usize) -> Option<f64> {
+    if t.len() < window.max(3) {
+        return None;
+    }
+    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(|a, b| a.total_cmp(b));
+    Some(steps[steps.len() / 2])
+}
+
 fn build_with(logs: &[FlightLog], options: &DatasetOptions, slopes: bool) -> Result<Dataset, DatasetError> {
     let mut segments = Vec::new();
     for (li, log) in logs.iter().enumerate() {
         for (si, seg) in log.segments.iter().enumerate() {
-            if seg.t.len() < options.savgol.window.max(3) {
+            let Some(dt) = usable_step(&seg.t, options.savgol.window) else {
                 continue;
-            }
-            let mut steps: Vec<f64> = seg.t.windows(2).map(|w| w[1] - w[0]).collect();
-            steps.sort_by(|a, b| a.total_cmp(b));
-            let dt = steps[steps.len() / 2];
+            };
             let err = |error| DatasetError::Filter {
                 file: log.source.clone(),
                 segment: si,

@@ -84,12 +84,9 @@ fn estimate_response(
     let mut segments = Vec::new();
     for (li, log) in logs.iter().enumerate() {
         for seg in &log.segments {
-            if seg.t.len() < savgol.window.max(3) {
+            let Some(dt) = crate::identify::dataset::usable_step(&seg.t, savgol.window) else {
                 continue;
-            }
-            let mut steps: Vec<f64> = seg.t.windows(2).map(|w| w[1] - w[0]).collect();
-            steps.sort_by(|a, b| a.total_cmp(b));
-            let dt = steps[steps.len() / 2];
+            };
             segments.extend(ScanSegment::interval_of(li, dt, &seg.t, &seg.x, &seg.u));
         }
     }
