@@ -37,7 +37,7 @@ pub(crate) fn where_input(base: &Augmented, segs: &[&SegData], horizon: usize, l
         for (i, k) in seg.interior().enumerate() {
             input.states.push(seg.x[k]);
             input.inputs.push(seg.u[k]);
-            input.time_in_flight.push(seg.segment_time[k]);
+            input.time_in_flight.push(seg.segment_time(k));
             input.stale.push(seg.stale[k]);
             if let Some(v) = &seg.volt {
                 volt.push(v[k]);
