@@ -37,8 +37,9 @@ pub(crate) struct SegData<'a> {
     pub kernel: Vec<f64>,
     /// Savitzky-Golay derivative of vx..yaw_rate at the interior samples.
     pub dx: Vec<[f64; 6]>,
-    /// The base model's f(x_m, u_m) at every row.
-    pub f: Vec<[f64; 12]>,
+    /// The base model's f(x_m, u_m) at every row, its dynamic rows vx..yaw_rate (the kinematic
+    /// rows are not needed: the residuals and corrections act on the dynamic ones).
+    pub f: Vec<[f64; 6]>,
     /// The base model's filtered one-step residual of vx..yaw_rate at the interior samples.
     pub r: Vec<[f64; 6]>,
     /// RK4 substeps per sample of the base model.
@@ -93,6 +94,11 @@ impl<'a> Prepared<'a> {
             (st + s.stale.iter().filter(|b| **b).count(), n + s.len())
         })
     }
+}
+
+/// The dynamic rows vx..yaw_rate of a model's ẋ.
+pub(crate) fn dynamic(f: &[f64; 12]) -> [f64; 6] {
+    std::array::from_fn(|c| f[6 + c])
 }
 
 /// Per segment of `log`, the time at which its flight time is 0: the log's first row, continued
@@ -160,7 +166,7 @@ fn build<'a>(
     let m = base.substeps(dt, rows.source)?;
     // The inputs the base model sees (its own delays and lags, if it has them).
     let seen = InputTransform::of_base(base).apply(rows.u, dt);
-    let f: Vec<[f64; 12]> = x.iter().zip(&seen).map(|(x, u)| base.f(x, u)).collect();
+    let f: Vec<[f64; 6]> = x.iter().zip(&seen).map(|(x, u)| dynamic(&base.f(x, u))).collect();
     let (w, r) = match residual {
         ResidualKind::Matched => {
             // One-step errors (x_{m+1} − F(x_m, u_m))/Δt of vx..yaw_rate, m = 0..n−2.
@@ -175,7 +181,7 @@ fn build<'a>(
         }
         ResidualKind::Pointwise => {
             let r = (h..n - h)
-                .map(|k| std::array::from_fn(|c| dx_all[k][6 + c] - f[k][6 + c]))
+                .map(|k| std::array::from_fn(|c| dx_all[k][6 + c] - f[k][c]))
                 .collect();
             (impulse(h), r)
         }

@@ -14,7 +14,7 @@
 use super::catalogue::inputs::InputTransform;
 use super::catalogue::linear::{columns, regressors, Context, Sample};
 use super::catalogue::EffectKind;
-use super::data::SegData;
+use super::data::{dynamic, SegData};
 use super::residuals::{filter, Base};
 use super::score::Sums;
 use std::borrow::Cow;
@@ -97,13 +97,13 @@ impl<'d> SegBase<'d> {
         }
     }
 
-    /// From f′ at every row (f′ under the transform, [`seen_f`]).
-    pub fn new(seg: &'d SegData<'d>, fs: &[[f64; 12]]) -> Self {
+    /// From f′ at every row (its dynamic rows under the transform, [`seen_f`]).
+    pub fn new(seg: &'d SegData<'d>, fs: &[[f64; 6]]) -> Self {
         let n = seg.len();
         let df: Vec<[f64; 6]> = fs
             .iter()
             .zip(&seg.f)
-            .map(|(a, b)| std::array::from_fn(|c| a[6 + c] - b[6 + c]))
+            .map(|(a, b)| std::array::from_fn(|c| a[c] - b[c]))
             .collect();
         let l = filter(&seg.kernel, &df, n);
         let r0 = seg
@@ -115,13 +115,13 @@ impl<'d> SegBase<'d> {
         Self {
             seg,
             r0: Cow::Owned(r0),
-            acc: Some(fs.iter().map(|f| [f[6], f[7], f[8]]).collect()),
+            acc: Some(fs.iter().map(|f| [f[0], f[1], f[2]]).collect()),
         }
     }
 
     /// Under `transform`, f′ from `seen` (called only when the transform is not the base
     /// model's own).
-    pub fn under(seg: &'d SegData<'d>, transform: &InputTransform, seen: impl FnOnce() -> Vec<[f64; 12]>) -> Self {
+    pub fn under(seg: &'d SegData<'d>, transform: &InputTransform, seen: impl FnOnce() -> Vec<[f64; 6]>) -> Self {
         if transform.is_identity() {
             Self::identity(seg)
         } else {
@@ -140,7 +140,7 @@ impl<'d> SegBase<'d> {
             Some(a) => a[m],
             None => {
                 let f = &self.seg.f[m];
-                [f[6], f[7], f[8]]
+                [f[0], f[1], f[2]]
             }
         }
     }
@@ -228,26 +228,26 @@ pub(crate) fn vertical_only(kind: EffectKind) -> bool {
     matches!(kind, EffectKind::ThrustGain | EffectKind::ThrustDecay)
 }
 
-/// f(x_m, ū_m) at every row: the base model with the inputs it sees, its lagged acceleration rows
-/// replaced by their lags' interval averages.
-pub(crate) fn seen_f(seg: &SegData, base: &Base, transform: &InputTransform) -> Vec<[f64; 12]> {
+/// f(x_m, ū_m) at every row, its dynamic rows vx..yaw_rate: the base model with the inputs it
+/// sees, its lagged acceleration rows replaced by their lags' interval averages.
+pub(crate) fn seen_f(seg: &SegData, base: &Base, transform: &InputTransform) -> Vec<[f64; 6]> {
     if transform.is_identity() {
         return seg.f.clone();
     }
     let u = transform.apply(&seg.u, seg.dt);
-    let mut f: Vec<[f64; 12]> = seg
+    let mut f: Vec<[f64; 6]> = seg
         .x
         .iter()
         .zip(&u)
-        .map(|(x, u)| transform.model_f(base, x, u))
+        .map(|(x, u)| dynamic(&transform.model_f(base, x, u)))
         .collect();
     if transform.accel_lag.iter().any(Option::is_some) {
         // The rows at the end of each sample under its input.
         let n = f.len();
-        let ends: Vec<[f64; 12]> = (0..n)
+        let ends: Vec<[f64; 6]> = (0..n)
             .map(|m| {
                 if m + 1 < n {
-                    transform.model_f(base, &seg.x[m + 1], &u[m])
+                    dynamic(&transform.model_f(base, &seg.x[m + 1], &u[m]))
                 } else {
                     f[m]
                 }

@@ -109,7 +109,7 @@ impl<'a> Problem<'a> {
     }
 
     /// f′ of `seg` under `tr` ([`seen_f`]), from the scan's cache when one is set.
-    pub fn seen_f(&self, seg: &SegData, tr: &InputTransform) -> Vec<[f64; 12]> {
+    pub fn seen_f(&self, seg: &SegData, tr: &InputTransform) -> Vec<[f64; 6]> {
         match &*self.seen.borrow() {
             Some(c) => c.seen_f(seg, self.base, tr),
             None => seen_f(seg, self.base, tr),
@@ -582,7 +582,7 @@ mod tests {
             for m in 0..n {
                 let s = Sample {
                     x: &seg.x[m],
-                    base_acc: [fs[m][6], fs[m][7], fs[m][8]],
+                    base_acc: [fs[m][0], fs[m][1], fs[m][2]],
                     flight_time: seg.flight_time(m),
                 };
                 regressors(kind, &s, &ctx, &mut buf[..q]);
