@@ -251,7 +251,7 @@ pub(crate) fn select(
         }
         let mut cur = current(p, &state);
         cur.before = before(p, &cur);
-        let base = *base_test.get_or_insert_with(|| cur.before.test);
+        let base = *base_test.get_or_insert(cur.before.test);
         cur.base_test = base;
         cur.horizon = horizon_errors(p, &state);
         // The total grows by a round's candidates as rounds start.
