@@ -131,7 +131,7 @@ impl Augmented<'_> {
     /// Delayed inputs and lag states of a segment.
     pub fn seen_inputs(&self, seg: &SegData) -> SeenInputs {
         let n = seg.len();
-        let mut v = seg.u.clone();
+        let mut v = seg.u.to_vec();
         let mut s = vec![[0.0; 10]; n];
         for j in 0..4 {
             let col: Vec<f64> = seg.u.iter().map(|r| r[j]).collect();
@@ -149,7 +149,7 @@ impl Augmented<'_> {
             // The base rows at the start and the end of every sample under its input, then their
             // lag (first-order hold between the two, as a flight computer would estimate it).
             let b = |m: usize, at: usize| {
-                let z = pack(&seg.x[at], &s[at], seg.flight_time[at]);
+                let z = pack(&seg.x[at], &s[at], seg.flight_time(at));
                 self.transform
                     .model_f(self.base, &seg.x[at], &self.effective(&z, &v[m]))
             };

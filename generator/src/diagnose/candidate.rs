@@ -18,11 +18,26 @@
 
 use super::catalogue::linear::columns;
 use super::catalogue::{EffectKind, Family};
-use super::design::design;
+use super::design::{seen_f, SegBase, CHUNK};
 use super::fit::MAX_LAG;
-use super::problem::{fit_linear, Current, Problem, State};
-use super::score::{sums_masked, taus, Rules};
-use super::scored::{finish, After, Candidate, Install, Params, Scored};
+use super::problem::{fit_linear, AfterSums, Current, Problem, State};
+use super::score::{taus, Rules};
+use super::scored::{finish, Candidate, Install, Params, Scored};
+
+/// The current residual summed as [`finish`] scores a candidate's (a candidate that changes nothing).
+fn current_sums(p: &Problem, cur: &Current) -> AfterSums {
+    let mut after = AfterSums::new(p, cur.segs.len());
+    for (s, base) in cur.segs.iter().enumerate() {
+        for i in 0..p.fits.len() {
+            if after.wants(i, s) {
+                base.chunks(&p.ctx, &cur.linear, CHUNK, |k0, d| {
+                    after.add(p, i, s, k0, &d.residual(&cur.linear, &cur.theta[i]));
+                });
+            }
+        }
+    }
+    after
+}
 
 /// Evaluate `kind` against `state`.
 pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &Rules) -> Candidate {
@@ -39,28 +54,45 @@ fn linear(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &R
     let mut kinds = state.linear.clone();
     kinds.push(kind);
     let own = columns(kind);
-    let mut after: After = Vec::new();
-    let mut per_fit = Vec::new();
     let fin = p.final_fit();
-    let (mut values, mut sigma) = (Vec::new(), Vec::new());
-    for (i, fold) in p.fits.iter().enumerate() {
-        let (theta, cov, w) = fit_linear(&cur.designs, &fold.train, &kinds, &cur.residual[i], &p.mask);
-        let res: Vec<Vec<[f64; 6]>> = cur.designs.iter().map(|d| d.residual(&kinds, &theta)).collect();
-        if i == fin {
-            let s = sums_masked(&res, &fold.train, &p.mask);
-            let ptot = theta.len();
-            let dof = (3 * s.n).saturating_sub(ptot).max(1) as f64;
-            let s2 = (0..3).map(|c| w[c] * s.sse[c]).sum::<f64>() / dof;
-            let parts: Vec<&[[f64; 6]]> = fold.train.iter().map(|&t| res[t].as_slice()).collect();
-            let tau = taus(&parts, &[0, 1, 2], MAX_LAG);
-            let tau_mean = (tau[0] + tau[1] + tau[2]) / 3.0;
-            let first = ptot - own;
-            values = theta[first..].to_vec();
-            sigma = (first..ptot).map(|q| (cov[(q, q)] * s2 * tau_mean).sqrt()).collect();
+    let trains: Vec<&[usize]> = p.fits.iter().map(|f| f.train.as_slice()).collect();
+    let fitted = fit_linear(p, &cur.segs, &trains, &kinds, &cur.before.fit_train);
+    let per_fit: Vec<Vec<f64>> = fitted.iter().map(|f| f.0.clone()).collect();
+    // The residual after, summed as `finish` scores it; the final fit's training residual kept
+    // for its autocorrelation time.
+    let mut after = AfterSums::new(p, cur.segs.len());
+    let mut fin_train: Vec<Vec<[f64; 6]>> = vec![Vec::new(); cur.segs.len()];
+    for (s, base) in cur.segs.iter().enumerate() {
+        let users: Vec<usize> = (0..p.fits.len()).filter(|&i| after.wants(i, s)).collect();
+        if users.is_empty() {
+            continue;
         }
-        per_fit.push(theta);
-        after.push(res);
+        let keep = p.fits[fin].train.contains(&s);
+        base.chunks(&p.ctx, &kinds, CHUNK, |k0, d| {
+            for &i in &users {
+                let res = d.residual(&kinds, &per_fit[i]);
+                after.add(p, i, s, k0, &res);
+                if i == fin && keep {
+                    fin_train[s].extend_from_slice(&res);
+                }
+            }
+        });
     }
+    let (values, sigma) = {
+        let (theta, cov, w) = &fitted[fin];
+        let s = after.train;
+        let ptot = theta.len();
+        let dof = (3 * s.n).saturating_sub(ptot).max(1) as f64;
+        let s2 = (0..3).map(|c| w[c] * s.sse[c]).sum::<f64>() / dof;
+        let parts: Vec<&[[f64; 6]]> = p.fits[fin].train.iter().map(|&t| fin_train[t].as_slice()).collect();
+        let tau = taus(&parts, &[0, 1, 2], MAX_LAG);
+        let tau_mean = (tau[0] + tau[1] + tau[2]) / 3.0;
+        let first = ptot - own;
+        let values = theta[first..].to_vec();
+        let sigma: Vec<f64> = (first..ptot).map(|q| (cov[(q, q)] * s2 * tau_mean).sqrt()).collect();
+        (values, sigma)
+    };
+    drop(fin_train);
     let z = values
         .iter()
         .zip(&sigma)
@@ -90,7 +122,7 @@ fn linear(p: &Problem, state: &State, cur: &Current, kind: EffectKind, rules: &R
     ));
     invalid.extend(
         super::physical::cancelling(
-            &cur.designs,
+            &|s, f| cur.chunks(p, s, &kinds, f),
             &p.fits[fin].train,
             &p.mask,
             &kinds,
@@ -130,15 +162,19 @@ fn stale(p: &Problem, state: &State, cur: &Current, rules: &Rules) -> Candidate 
     let applicable = p.data.destaled.is_some() && !state.destale;
     let (after, params, install) = if applicable {
         let segs = p.data.variant(true);
-        let designs: Vec<_> = segs
-            .iter()
-            .map(|s| design(s, p.base, &state.transform, &p.ctx, &state.linear))
-            .collect();
-        let after: After = state
-            .theta
-            .iter()
-            .map(|th| designs.iter().map(|d| d.residual(&state.linear, th)).collect())
-            .collect();
+        let mut after = AfterSums::new(p, segs.len());
+        for (s, seg) in segs.iter().enumerate() {
+            let users: Vec<usize> = (0..p.fits.len()).filter(|&i| after.wants(i, s)).collect();
+            if users.is_empty() {
+                continue;
+            }
+            let base = SegBase::under(seg, &state.transform, || seen_f(seg, p.base, &state.transform));
+            base.chunks(&p.ctx, &state.linear, CHUNK, |k0, d| {
+                for &i in &users {
+                    after.add(p, i, s, k0, &d.residual(&state.linear, &state.theta[i]));
+                }
+            });
+        }
         let (train_rows, train_total) = p.data.stale_rows(false);
         let (holdout_rows, holdout_total) = p.data.stale_rows(true);
         (
@@ -152,7 +188,7 @@ fn stale(p: &Problem, state: &State, cur: &Current, rules: &Rules) -> Candidate 
             Install::Stale,
         )
     } else {
-        (cur.residual.clone(), Params::NotApplicable, Install::Nothing)
+        (current_sums(p, cur), Params::NotApplicable, Install::Nothing)
     };
     let after_state = State {
         destale: applicable,

@@ -8,10 +8,13 @@ use super::DiagnoseError;
 use crate::identify::preprocess::{try_columnwise, SavGol};
 use crate::logs::stale::{destale, stale_flags};
 use crate::logs::{median, FlightLog};
+use std::borrow::Cow;
 
-/// One stretch of data (a segment, or a part of one for cross-validation).
+/// One stretch of data (a segment, or a part of one for cross-validation). The time stamps,
+/// states, inputs and voltages are the log's own rows (borrowed; the states are a copy only with
+/// stale rows interpolated).
 #[derive(Clone, Debug)]
-pub(crate) struct SegData {
+pub(crate) struct SegData<'a> {
     /// Index in the training or the held-out list.
     pub log: usize,
     pub holdout: bool,
@@ -20,25 +23,23 @@ pub(crate) struct SegData {
     pub part: usize,
     /// The segment's median step, s.
     pub dt: f64,
-    pub t: Vec<f64>,
-    pub x: Vec<[f64; 12]>,
-    pub u: Vec<[f64; 4]>,
-    pub volt: Option<Vec<f64>>,
+    pub t: Cow<'a, [f64]>,
+    pub x: Cow<'a, [[f64; 12]]>,
+    pub u: Cow<'a, [[f64; 4]]>,
+    pub volt: Option<Cow<'a, [f64]>>,
     /// Rows that repeat the previous row's states (as logged, also in the interpolated copy).
     pub stale: Vec<bool>,
-    /// Seconds since the first row of the log (continued over segments; restarted consistently
-    /// when a segment's clock restarts).
-    pub flight_time: Vec<f64>,
-    /// Seconds since the first row of the segment.
-    pub segment_time: Vec<f64>,
+    /// The time at which the log's flight time is 0 for this segment ([`SegData::flight_time`]).
+    pub flight_origin: f64,
     /// The Savitzky-Golay half window: samples h..n−h are the interior ones.
     pub h: usize,
     /// The kernel w_μ of the derivative (length 2h).
     pub kernel: Vec<f64>,
     /// Savitzky-Golay derivative of vx..yaw_rate at the interior samples.
     pub dx: Vec<[f64; 6]>,
-    /// The base model's f(x_m, u_m) at every row.
-    pub f: Vec<[f64; 12]>,
+    /// The base model's f(x_m, u_m) at every row, its dynamic rows vx..yaw_rate (the kinematic
+    /// rows are not needed: the residuals and corrections act on the dynamic ones).
+    pub f: Vec<[f64; 6]>,
     /// The base model's filtered one-step residual of vx..yaw_rate at the interior samples.
     pub r: Vec<[f64; 6]>,
     /// RK4 substeps per sample of the base model.
@@ -50,7 +51,7 @@ pub(crate) struct SegData {
     pub residual: ResidualKind,
 }
 
-impl SegData {
+impl SegData<'_> {
     pub fn len(&self) -> usize {
         self.t.len()
     }
@@ -59,16 +60,27 @@ impl SegData {
     pub fn interior(&self) -> std::ops::Range<usize> {
         self.h..self.len() - self.h
     }
+
+    /// Seconds since the first row of the log at row m (continued over segments; restarted
+    /// consistently when a segment's clock restarts).
+    pub fn flight_time(&self, m: usize) -> f64 {
+        self.t[m] - self.flight_origin
+    }
+
+    /// Seconds since the first row of the segment at row m.
+    pub fn segment_time(&self, m: usize) -> f64 {
+        self.t[m] - self.t[0]
+    }
 }
 
 /// The raw data and, if any row is stale, the copy with stale rows interpolated.
-pub(crate) struct Prepared {
-    pub raw: Vec<SegData>,
-    pub destaled: Option<Vec<SegData>>,
+pub(crate) struct Prepared<'a> {
+    pub raw: Vec<SegData<'a>>,
+    pub destaled: Option<Vec<SegData<'a>>>,
 }
 
-impl Prepared {
-    pub fn variant(&self, destaled: bool) -> &[SegData] {
+impl<'a> Prepared<'a> {
+    pub fn variant(&self, destaled: bool) -> &[SegData<'a>] {
         match (&self.destaled, destaled) {
             (Some(d), true) => d,
             _ => &self.raw,
@@ -84,25 +96,29 @@ impl Prepared {
     }
 }
 
-/// Flight time of every row of every segment of `log`: t − t₀ of the log, continued over
-/// segments; when a segment's clock goes back, it continues from the previous segment's end.
-fn flight_times(log: &FlightLog) -> Vec<Vec<f64>> {
+/// The dynamic rows vx..yaw_rate of a model's ẋ.
+pub(crate) fn dynamic(f: &[f64; 12]) -> [f64; 6] {
+    std::array::from_fn(|c| f[6 + c])
+}
+
+/// Per segment of `log`, the time at which its flight time is 0: the log's first row, continued
+/// over segments; when a segment's clock goes back, it continues from the previous segment's end.
+fn flight_origins(log: &FlightLog) -> Vec<f64> {
     let mut out = Vec::new();
     let mut origin = log.segments.first().and_then(|s| s.t.first()).copied().unwrap_or(0.0);
     let (mut prev_end, mut prev_flight) = (f64::NEG_INFINITY, 0.0);
     for seg in &log.segments {
         let Some(&t0) = seg.t.first() else {
-            out.push(Vec::new());
+            out.push(origin);
             continue;
         };
         if t0 <= prev_end {
             let step = median(&seg.t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>()).unwrap_or(0.0);
             origin = t0 - (prev_flight + step);
         }
-        let tf: Vec<f64> = seg.t.iter().map(|t| t - origin).collect();
         prev_end = *seg.t.last().unwrap_or(&t0);
-        prev_flight = *tf.last().unwrap_or(&0.0);
-        out.push(tf);
+        prev_flight = prev_end - origin;
+        out.push(origin);
     }
     out
 }
@@ -118,24 +134,24 @@ struct Rows<'a> {
     x: &'a [[f64; 12]],
     u: &'a [[f64; 4]],
     volt: Option<&'a [f64]>,
-    flight_time: &'a [f64],
+    flight_origin: f64,
 }
 
-fn build(
+fn build<'a>(
     base: &Base,
     savgol: &SavGol,
     residual: ResidualKind,
-    rows: &Rows,
+    rows: &Rows<'a>,
     interpolate: bool,
-) -> Result<SegData, DiagnoseError> {
+) -> Result<SegData<'a>, DiagnoseError> {
     let n = rows.t.len();
     let steps: Vec<f64> = rows.t.windows(2).map(|w| w[1] - w[0]).collect();
     let dt = median(&steps).unwrap_or(0.0);
     let stale = stale_flags(rows.x);
-    let x = if interpolate {
-        destale(rows.t, rows.x, &stale)
+    let x: Cow<'a, [[f64; 12]]> = if interpolate {
+        Cow::Owned(destale(rows.t, rows.x, &stale))
     } else {
-        rows.x.to_vec()
+        Cow::Borrowed(rows.x)
     };
     let err = |e: crate::identify::preprocess::PreprocessError| DiagnoseError::Data {
         file: rows.source.to_string(),
@@ -150,7 +166,7 @@ fn build(
     let m = base.substeps(dt, rows.source)?;
     // The inputs the base model sees (its own delays and lags, if it has them).
     let seen = InputTransform::of_base(base).apply(rows.u, dt);
-    let f: Vec<[f64; 12]> = x.iter().zip(&seen).map(|(x, u)| base.f(x, u)).collect();
+    let f: Vec<[f64; 6]> = x.iter().zip(&seen).map(|(x, u)| dynamic(&base.f(x, u))).collect();
     let (w, r) = match residual {
         ResidualKind::Matched => {
             // One-step errors (x_{m+1} − F(x_m, u_m))/Δt of vx..yaw_rate, m = 0..n−2.
@@ -165,12 +181,11 @@ fn build(
         }
         ResidualKind::Pointwise => {
             let r = (h..n - h)
-                .map(|k| std::array::from_fn(|c| dx_all[k][6 + c] - f[k][6 + c]))
+                .map(|k| std::array::from_fn(|c| dx_all[k][6 + c] - f[k][c]))
                 .collect();
             (impulse(h), r)
         }
     };
-    let t0 = rows.t[0];
     let ground = crate::logs::on_ground(&x);
     let airborne = (h..n - h)
         .map(|k| !crate::logs::run_touches_ground(&ground, k - h, 2 * h))
@@ -181,13 +196,12 @@ fn build(
         segment: rows.segment,
         part: rows.part,
         dt,
-        t: rows.t.to_vec(),
+        t: Cow::Borrowed(rows.t),
         x,
-        u: rows.u.to_vec(),
-        volt: rows.volt.map(<[f64]>::to_vec),
+        u: Cow::Borrowed(rows.u),
+        volt: rows.volt.map(Cow::Borrowed),
         stale,
-        flight_time: rows.flight_time.to_vec(),
-        segment_time: rows.t.iter().map(|t| t - t0).collect(),
+        flight_origin: rows.flight_origin,
         h,
         kernel: w,
         dx,
@@ -202,19 +216,19 @@ fn build(
 /// Prepare the training and held-out logs. Segments shorter than `min_rows` (at least the
 /// Savitzky-Golay window + 1) are skipped; with `split` > 1 every training segment is cut into
 /// that many parts (cross-validation on a single segment).
-pub(crate) fn prepare(
+pub(crate) fn prepare<'a>(
     base: &Base,
     savgol: &SavGol,
     residual: ResidualKind,
-    train: &[FlightLog],
-    holdout: &[FlightLog],
+    train: &'a [FlightLog],
+    holdout: &'a [FlightLog],
     split: usize,
-) -> Result<Prepared, DiagnoseError> {
+) -> Result<Prepared<'a>, DiagnoseError> {
     let min_rows = savgol.window + 2;
     let mut stretches = Vec::new();
     for (holdout_flag, logs) in [(false, train), (true, holdout)] {
         for (li, log) in logs.iter().enumerate() {
-            let times = flight_times(log);
+            let origins = flight_origins(log);
             for (si, seg) in log.segments.iter().enumerate() {
                 let parts = if holdout_flag { 1 } else { split.max(1) };
                 let len = seg.len() / parts;
@@ -224,7 +238,7 @@ pub(crate) fn prepare(
                     if hi - lo < min_rows {
                         continue;
                     }
-                    stretches.push((holdout_flag, li, log, si, p, lo..hi, times[si].clone()));
+                    stretches.push((holdout_flag, li, log, si, p, lo..hi, origins[si]));
                 }
             }
         }
@@ -233,7 +247,7 @@ pub(crate) fn prepare(
     let build_all = |drop_stale: bool| -> Result<Vec<_>, _> {
         stretches
             .iter()
-            .map(|(holdout_flag, li, log, si, p, range, tf)| {
+            .map(|(holdout_flag, li, log, si, p, range, origin)| {
                 let seg = &log.segments[*si];
                 let rows = Rows {
                     source: &log.source,
@@ -245,7 +259,7 @@ pub(crate) fn prepare(
                     x: &seg.x[range.clone()],
                     u: &seg.u[range.clone()],
                     volt: seg.battery_voltage.as_deref().map(|v| &v[range.clone()]),
-                    flight_time: &tf[range.clone()],
+                    flight_origin: *origin,
                 };
                 build(base, savgol, residual, &rows, drop_stale)
             })
@@ -269,7 +283,12 @@ mod tests {
             20,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,1\n21,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,1\n\
             0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,2\n1,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,2\n";
         let log = crate::logs::parse_log(text, "t.csv").unwrap();
-        let tf = flight_times(&log);
+        let tf: Vec<Vec<f64>> = log
+            .segments
+            .iter()
+            .zip(flight_origins(&log))
+            .map(|(s, o)| s.t.iter().map(|t| t - o).collect())
+            .collect();
         assert_eq!(tf, vec![vec![0.0, 1.0], vec![10.0, 11.0], vec![12.0, 13.0]]);
     }
 }

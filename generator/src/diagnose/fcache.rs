@@ -11,25 +11,26 @@
 //! ([`Scope`]); [`super::problem::Problem::seen_f`] consults it.
 
 use super::catalogue::inputs::InputTransform;
-use super::data::SegData;
+use super::data::{dynamic, SegData};
 use super::design::seen_f;
 use super::residuals::Base;
 use crate::symbolic::Partial;
 
 /// The reference evaluation at one set of points (x_m, ū_m) of a segment.
 struct Points {
-    f: Vec<[f64; 12]>,
+    /// The dynamic rows vx..yaw_rate of f (the kinematic ones do not depend on the inputs and are
+    /// not used).
+    f: Vec<[f64; 6]>,
     /// Frontier values of the partial tape, `width` per point.
     front: Vec<f64>,
 }
 
-/// One segment under the reference transform.
+/// One segment under the reference transform (the inputs the model sees under it are computed
+/// again when needed: [`InputTransform::apply`] is cheap next to the model).
 struct SegCache {
     /// The segment's states (identity of the segment: the data are not moved while cached).
     x: *const [f64; 12],
     n: usize,
-    /// The inputs the model sees under the reference transform.
-    u: Vec<[f64; 4]>,
     /// At (x_m, ū_m).
     at: Points,
     /// At (x_{m+1}, ū_m) (the ends of the samples, for acceleration lags), m + 1 < n.
@@ -38,6 +39,7 @@ struct SegCache {
 
 /// f′ under transforms near a reference (module docs).
 pub(crate) struct SeenCache {
+    reference: InputTransform,
     /// The input that may differ from the reference (None: none may, only row lags).
     input: Option<usize>,
     partial: Option<Partial>,
@@ -63,7 +65,7 @@ impl SeenCache {
         let partial = input.map(|j| tape.partial(&[12 + j]));
         let width = partial.as_ref().map_or(0, Partial::frontier_len);
         let mut values = Vec::new();
-        let mut eval = |x: &[f64; 12], u: &[f64; 4], front: &mut Vec<f64>| -> [f64; 12] {
+        let mut eval = |x: &[f64; 12], u: &[f64; 4], front: &mut Vec<f64>| -> [f64; 6] {
             let mut vars = [0.0; 16];
             vars[..12].copy_from_slice(x);
             vars[12..].copy_from_slice(u);
@@ -72,7 +74,7 @@ impl SeenCache {
             if let Some(p) = &partial {
                 p.gather(&values, front);
             }
-            out
+            dynamic(&out)
         };
         let segs = segs
             .iter()
@@ -101,13 +103,17 @@ impl SeenCache {
                 SegCache {
                     x: seg.x.as_ptr(),
                     n,
-                    u,
                     at,
                     ends,
                 }
             })
             .collect();
-        Some(Self { input, partial, segs })
+        Some(Self {
+            reference: *reference,
+            input,
+            partial,
+            segs,
+        })
     }
 
     fn find(&self, seg: &SegData) -> Option<&SegCache> {
@@ -118,7 +124,7 @@ impl SeenCache {
 
     /// f′ of `seg` under `tr` (= [`seen_f`]), from the cache where it holds the segment and `tr`
     /// has no loop mismatches.
-    pub fn seen_f(&self, seg: &SegData, base: &Base, tr: &InputTransform) -> Vec<[f64; 12]> {
+    pub fn seen_f(&self, seg: &SegData, base: &Base, tr: &InputTransform) -> Vec<[f64; 6]> {
         let Some(c) = self.find(seg) else {
             return seen_f(seg, base, tr);
         };
@@ -127,16 +133,17 @@ impl SeenCache {
             return seen_f(seg, base, tr);
         }
         let u = tr.apply(&seg.u, seg.dt);
+        let reference_u = self.reference.apply(&seg.u, seg.dt);
         let mut scratch = Vec::new();
-        let mut f: Vec<[f64; 12]> = (0..c.n)
-            .map(|m| self.point(base, &c.at, m, &seg.x[m], &c.u[m], &u[m], &mut scratch))
+        let mut f: Vec<[f64; 6]> = (0..c.n)
+            .map(|m| self.point(base, &c.at, m, &seg.x[m], &reference_u[m], &u[m], &mut scratch))
             .collect();
         if lagged {
             let ends_at = c.ends.as_ref().expect("checked above");
-            let ends: Vec<[f64; 12]> = (0..c.n)
+            let ends: Vec<[f64; 6]> = (0..c.n)
                 .map(|m| {
                     if m + 1 < c.n {
-                        self.point(base, ends_at, m, &seg.x[m + 1], &c.u[m], &u[m], &mut scratch)
+                        self.point(base, ends_at, m, &seg.x[m + 1], &reference_u[m], &u[m], &mut scratch)
                     } else {
                         f[m]
                     }
@@ -158,7 +165,7 @@ impl SeenCache {
         reference_u: &[f64; 4],
         u: &[f64; 4],
         scratch: &mut Vec<f64>,
-    ) -> [f64; 12] {
+    ) -> [f64; 6] {
         let same = |k: usize| reference_u[k].to_bits() == u[k].to_bits();
         if (0..4).all(same) {
             return points.f[m];
@@ -169,11 +176,14 @@ impl SeenCache {
                 let mut vars = [0.0; 16];
                 vars[..12].copy_from_slice(x);
                 vars[12..].copy_from_slice(u);
-                let mut f = points.f[m];
+                // The partial tape writes the outputs that depend on u_j; the others are the
+                // reference's (the kinematic rows, which no input drives, are not kept).
+                let mut f = [0.0; 12];
+                f[6..].copy_from_slice(&points.f[m]);
                 p.eval(&points.front[m * w..(m + 1) * w], &vars, scratch, &mut f);
-                return f;
+                return dynamic(&f);
             }
         }
-        base.f(x, u)
+        dynamic(&base.f(x, u))
     }
 }

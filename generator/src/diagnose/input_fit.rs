@@ -6,13 +6,13 @@
 
 use super::catalogue::inputs::{delay_grid, InputTransform, LAG_CHANNELS};
 use super::catalogue::EffectKind;
-use super::design::design;
-use super::fit::{profile_sigma, MAX_LAG};
+use super::design::{seen_f, SegBase, CHUNK};
+use super::fit::profile_sigma;
 use super::horizon_fit::Bracket;
 use super::horizon_rule::horizon_errors;
-use super::problem::{Current, HorizonErrors, Problem, State};
-use super::score::{lr_z, sums_masked, taus, Rules, Sums};
-use super::scored::{finish, roles, under, After, Candidate, InputParam, Install, Params, Role, Scored};
+use super::problem::{AfterSums, Current, HorizonErrors, Problem, State};
+use super::score::{lr_z, Rules, Sums};
+use super::scored::{finish, under, Candidate, InputParam, Install, Params, Scored};
 
 /// A channel's scan: its parameter, the dynamic rows it acts on and, per fit, the value that
 /// fit's training data chose.
@@ -120,7 +120,7 @@ fn scan_channel(
         let tr = with_channel(&state.transform, kind, j, v);
         points.push(Point {
             value: v,
-            sums: under(p, state, &tr, false).0,
+            sums: under(p, state, &tr, None),
         });
     };
     match kind {
@@ -163,13 +163,8 @@ fn scan_channel(
     let best = argmin(&points, fin, &aff);
     let value = points[best].value;
     // τ of the residual before (training data of the final fit), as in `finish`.
-    let slices: Vec<&[[f64; 6]]> = p.fits[fin]
-        .train
-        .iter()
-        .map(|&s| cur.residual[fin][s].as_slice())
-        .collect();
-    let tau = taus(&slices, &aff, MAX_LAG);
-    let before = sums_masked(&cur.residual[fin], &p.fits[fin].train, &p.mask);
+    let tau = cur.before.train_tau;
+    let before = cur.before.train();
     let z = lr_z(&before, &points[best].sums[fin].0, &tau, &aff);
     let ell = |q: &Point| -> f64 {
         let s = &q.sums[fin].0;
@@ -284,19 +279,20 @@ fn score(
     after_horizon: Option<HorizonErrors>,
 ) -> Candidate {
     let segs = p.data.variant(state.destale);
-    let role = roles(p, segs.len());
-    let mut after: After = vec![vec![Vec::new(); segs.len()]; p.fits.len()];
+    let mut after = AfterSums::new(p, segs.len());
     for (i, th) in state.theta.iter().enumerate() {
         let mut tr = state.transform;
         for &q in &used {
             tr = with_channel(&tr, kind, scans[q].param.input, scans[q].chosen[i]);
         }
         for (s, seg) in segs.iter().enumerate() {
-            if role[i][s] == Role::None {
+            if !after.wants(i, s) {
                 continue;
             }
-            let d = design(seg, p.base, &tr, &p.ctx, &state.linear);
-            after[i][s] = d.residual(&state.linear, th);
+            let b = SegBase::under(seg, &tr, || seen_f(seg, p.base, &tr));
+            b.chunks(&p.ctx, &state.linear, CHUNK, |k0, d| {
+                after.add(p, i, s, k0, &d.residual(&state.linear, th));
+            });
         }
     }
     let mut channels: Vec<usize> = used.iter().flat_map(|&q| scans[q].aff.clone()).collect();

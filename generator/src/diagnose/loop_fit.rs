@@ -19,11 +19,10 @@
 use super::catalogue::loops::{channel, LoopParams, NLOOPS};
 use super::catalogue::EffectKind;
 use super::data::SegData;
-use super::fit::MAX_LAG;
-use super::problem::{Current, Problem, State};
+use super::problem::{AfterSums, Current, Problem, State};
 use super::residuals::{filter, Base};
-use super::score::{taus, Rules};
-use super::scored::{finish, After, Candidate, Install, LoopFit, Params, Scored};
+use super::score::Rules;
+use super::scored::{finish, Candidate, Install, LoopFit, Params, Scored};
 
 /// A loop is a mismatch only when it differs materially from the base model's: its bandwidth
 /// ratio √gain outside [1/[`MATERIAL_BANDWIDTH`], [`MATERIAL_BANDWIDTH`]] or its coupling changed by
@@ -126,27 +125,19 @@ fn solve(
     (theta, cov, n, sse)
 }
 
-/// `res` with the loops' corrections θ (per loop, None: not part of the effect) subtracted.
-fn subtract(
-    res: &[Vec<[f64; 6]>],
-    cols: &[Vec<[f64; 2 * NLOOPS]>],
-    theta: &[Option<[f64; 2]>; NLOOPS],
-) -> Vec<Vec<[f64; 6]>> {
+/// A segment's residual `res` with the loops' corrections θ (per loop, None: not part of the
+/// effect) subtracted.
+fn subtract(res: &[[f64; 6]], cols: &[[f64; 2 * NLOOPS]], theta: &[Option<[f64; 2]>; NLOOPS]) -> Vec<[f64; 6]> {
     res.iter()
         .zip(cols)
-        .map(|(r, col)| {
-            r.iter()
-                .zip(col)
-                .map(|(rk, ck)| {
-                    let mut out = *rk;
-                    for (l, th) in theta.iter().enumerate() {
-                        if let Some(th) = th {
-                            out[channel(l)] -= th[0] * ck[2 * l] + th[1] * ck[2 * l + 1];
-                        }
-                    }
-                    out
-                })
-                .collect()
+        .map(|(rk, ck)| {
+            let mut out = *rk;
+            for (l, th) in theta.iter().enumerate() {
+                if let Some(th) = th {
+                    out[channel(l)] -= th[0] * ck[2 * l] + th[1] * ck[2 * l + 1];
+                }
+            }
+            out
         })
         .collect()
 }
@@ -164,11 +155,11 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
     let cols: Vec<_> = segs.iter().map(|s| columns(s, p.base, state)).collect();
     let fin = p.final_fit();
     let train = &p.fits[fin].train;
-    let before: Vec<&[[f64; 6]]> = train.iter().map(|&s| cur.residual[fin][s].as_slice()).collect();
-    let tau = taus(&before, &[3, 4, 5], MAX_LAG);
+    let tau = cur.before.train_tau;
+    let res_fin = cur.residual(p, fin);
     let mut fits = Vec::new();
     for l in 0..NLOOPS {
-        let (theta, cov, n, sse) = solve(&cols, &cur.residual[fin], train, &p.mask, l);
+        let (theta, cov, n, sse) = solve(&cols, &res_fin, train, &p.mask, l);
         let s2 = sse / (n.saturating_sub(2).max(1)) as f64 * tau[channel(l)];
         let sig = [(cov[0][0] * s2).sqrt(), (cov[1][1] * s2).sqrt()];
         let z = (0..2)
@@ -214,13 +205,19 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
     } else {
         kept
     };
-    let mut after: After = Vec::new();
+    drop(res_fin);
+    let mut after = AfterSums::new(p, segs.len());
     for (i, fold) in p.fits.iter().enumerate() {
+        let res = cur.residual(p, i);
         let mut theta = [None; NLOOPS];
         for &l in &used {
-            theta[l] = Some(solve(&cols, &cur.residual[i], &fold.train, &p.mask, l).0);
+            theta[l] = Some(solve(&cols, &res, &fold.train, &p.mask, l).0);
         }
-        after.push(subtract(&cur.residual[i], &cols, &theta));
+        for (s, (r, col)) in res.iter().zip(&cols).enumerate() {
+            if after.wants(i, s) {
+                after.add(p, i, s, 0, &subtract(r, col, &theta));
+            }
+        }
     }
     let mut transform = state.transform;
     for &l in &used {
@@ -279,13 +276,13 @@ pub(crate) fn refit(p: &Problem, state: &mut State) {
     }
     let mut without = state.clone();
     without.transform.loops = [None; NLOOPS];
-    let cur = super::problem::current(p, &without);
+    let fin = p.final_fit();
+    let res = super::problem::current(p, &without).residual(p, fin);
     let segs = p.data.variant(state.destale);
     let cols: Vec<_> = segs.iter().map(|s| columns(s, p.base, state)).collect();
-    let fin = p.final_fit();
     for l in 0..NLOOPS {
         if state.transform.loops[l].is_some() {
-            let (theta, ..) = solve(&cols, &cur.residual[fin], &p.fits[fin].train, &p.mask, l);
+            let (theta, ..) = solve(&cols, &res, &p.fits[fin].train, &p.mask, l);
             let fitted = params(&theta);
             if fitted.gain > 0.0 {
                 state.transform.loops[l] = Some(fitted);

@@ -57,7 +57,7 @@ pub use residuals::ResidualKind;
 pub use score::Rules;
 pub use shrink::{ClosedLoop, ClosedLoopRun, Shrink, Side, StateShrink};
 
-use crate::analysis::{WhereInput, WhereReport};
+use crate::analysis::WhereReport;
 use crate::identify::preprocess::SavGol;
 use crate::logs::{FlightLog, INPUT_COLUMNS};
 use crate::model::{Corrections, Model};
@@ -228,8 +228,6 @@ pub struct Diagnosis {
     /// [`response_time`]).
     pub response_times: Vec<response_time::ChannelTime>,
     pub options: DiagnoseOptions,
-    #[serde(skip)]
-    where_input: Option<WhereInput>,
 }
 
 /// The model gap on noise-free logs of the held-out flights: the base model and the model with
@@ -480,7 +478,7 @@ fn run(
     } else {
         envelope::masks(&data.raw)
     };
-    let (where_input, where_report) = where_analysis(&base, ctx, &data, train, options, progress);
+    let where_report = where_analysis(&base, ctx, &data, train, options, progress);
     let problem = problem::Problem {
         base: &base,
         data: &data,
@@ -556,7 +554,6 @@ fn run(
         warnings,
         response_times,
         options: options.clone(),
-        where_input,
     })
 }
 
@@ -592,7 +589,7 @@ fn physical_warnings(
         }
         let cur = problem::current(problem, state);
         for c in physical::cancelling(
-            &cur.designs,
+            &|s, f| cur.chunks(problem, s, &state.linear, f),
             &problem.fits[fin].train,
             &problem.mask,
             &state.linear,
@@ -607,14 +604,14 @@ fn physical_warnings(
 }
 
 /// The prepared training (and held-out) data; an error when either has no usable segment.
-fn prepare_data(
+fn prepare_data<'a>(
     base: &residuals::Base,
     options: &DiagnoseOptions,
-    train: &[FlightLog],
-    holdout: &[FlightLog],
+    train: &'a [FlightLog],
+    holdout: &'a [FlightLog],
     split: usize,
     progress: &mut dyn FnMut(Progress),
-) -> Result<data::Prepared, DiagnoseError> {
+) -> Result<data::Prepared<'a>, DiagnoseError> {
     progress(Progress {
         done: 0,
         total: 0,
@@ -637,7 +634,9 @@ fn prepare_data(
     Ok(data)
 }
 
-/// Where: the base model's residuals on the training logs (when asked for), and their report.
+/// Where: the report on the base model's residuals on the training logs (when asked for). The
+/// analysis input (the residual series and the samples, ~230 bytes per training sample) is not
+/// kept: the report holds what the plots draw ([`crate::analysis::write_plots`]).
 fn where_analysis(
     base: &residuals::Base,
     ctx: Context,
@@ -645,20 +644,17 @@ fn where_analysis(
     train: &[FlightLog],
     options: &DiagnoseOptions,
     progress: &mut dyn FnMut(Progress),
-) -> (Option<WhereInput>, Option<WhereReport>) {
-    let input = options.where_analysis.then(|| {
+) -> Option<WhereReport> {
+    options.where_analysis.then(|| {
         progress(Progress {
             done: 0,
             total: 0,
             what: "where: residual analysis",
         });
         let segs: Vec<&data::SegData> = data.raw.iter().filter(|s| !s.holdout).collect();
-        where_link::where_input(&Augmented::plain(base, ctx), &segs, options.horizon, train)
-    });
-    let report = input
-        .as_ref()
-        .map(|input| where_link::where_report(input, options.horizon));
-    (input, report)
+        let input = where_link::where_input(&Augmented::plain(base, ctx), &segs, options.horizon, train);
+        where_link::where_report(&input, options.horizon)
+    })
 }
 
 /// How far the gap shrinks on the held-out data of every test fit, and the same on the

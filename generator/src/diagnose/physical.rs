@@ -136,11 +136,16 @@ impl Cancel {
     }
 }
 
+/// The designs of segment s, a piece at a time: `designs(s, f)` calls `f(first sample, design)`
+/// for consecutive pieces of the segment's interior samples (with the columns of the kinds asked
+/// for).
+pub(crate) type Designs<'a> = dyn Fn(usize, &mut dyn FnMut(usize, &Design)) + 'a;
+
 /// Per-sample contribution of each linear effect of `kinds` (θ concatenated) on the masked
 /// samples of `segs`, and the cancelling pairs among them that involve `only` (all pairs when
 /// `None`).
 pub(crate) fn cancelling(
-    designs: &[Design],
+    designs: &Designs,
     segs: &[usize],
     mask: &[Vec<bool>],
     kinds: &[EffectKind],
@@ -164,33 +169,34 @@ pub(crate) fn cancelling(
     let mut count = 0usize;
     let mut contrib = vec![[0.0; 3]; n];
     for &s in segs {
-        let d = &designs[s];
-        for (k, r) in d.r0.iter().enumerate() {
-            if !mask[s].get(k).copied().unwrap_or(false) {
-                continue;
-            }
-            count += 1;
-            for (e, &kind) in kinds.iter().enumerate() {
-                let mut c3 = [0.0; 3];
-                for (q, col) in d.columns_of(kind).iter().enumerate() {
-                    let th = theta[offsets[e] + q];
-                    for c in 0..3 {
-                        c3[c] += col[k][c] * th;
+        designs(s, &mut |k0, d| {
+            for (k, r) in d.r0.iter().enumerate() {
+                if !mask[s].get(k0 + k).copied().unwrap_or(false) {
+                    continue;
+                }
+                count += 1;
+                for (e, &kind) in kinds.iter().enumerate() {
+                    let mut c3 = [0.0; 3];
+                    for (q, col) in d.columns_of(kind).iter().enumerate() {
+                        let th = theta[offsets[e] + q];
+                        for c in 0..3 {
+                            c3[c] += col[k][c] * th;
+                        }
+                    }
+                    contrib[e] = c3;
+                }
+                for c in 0..3 {
+                    gap[c] += r[c] * r[c];
+                    for a in 0..n {
+                        sq[a][c] += contrib[a][c] * contrib[a][c];
+                        for b in a + 1..n {
+                            let v = contrib[a][c] + contrib[b][c];
+                            pair[a][b][c] += v * v;
+                        }
                     }
                 }
-                contrib[e] = c3;
             }
-            for c in 0..3 {
-                gap[c] += r[c] * r[c];
-                for a in 0..n {
-                    sq[a][c] += contrib[a][c] * contrib[a][c];
-                    for b in a + 1..n {
-                        let v = contrib[a][c] + contrib[b][c];
-                        pair[a][b][c] += v * v;
-                    }
-                }
-            }
-        }
+        });
     }
     if count == 0 {
         return Vec::new();
@@ -253,9 +259,12 @@ mod tests {
     use super::*;
     use crate::diagnose::response_time::Response;
 
-    fn design(n: usize, thrust_z: impl Fn(usize) -> f64, gap: impl Fn(usize) -> f64) -> Design {
+    fn design(n: usize, thrust_z: impl Fn(usize) -> f64, gap: impl Fn(usize) -> f64) -> Design<'static> {
         Design {
-            r0: (0..n).map(|k| [0.0, 0.0, gap(k), 0.0, 0.0, 0.0]).collect(),
+            r0: (0..n)
+                .map(|k| [0.0, 0.0, gap(k), 0.0, 0.0, 0.0])
+                .collect::<Vec<_>>()
+                .into(),
             cols: vec![
                 (
                     EffectKind::ForceBias,
@@ -282,42 +291,21 @@ mod tests {
         let d = design(n, |k| 9.81 + 0.5 * (k as f64 * 0.1).sin(), |k| (k as f64 * 0.1).sin());
         let kinds = [EffectKind::ForceBias, EffectKind::ThrustGain];
         let mask = vec![vec![true; n]];
-        let c = cancelling(
-            std::slice::from_ref(&d),
-            &[0],
-            &mask,
-            &kinds,
-            &[0.0, 0.0, 8.3, -0.85],
-            None,
-        );
+        let c = cancelling(&|_, f| f(0, &d), &[0], &mask, &kinds, &[0.0, 0.0, 8.3, -0.85], None);
         assert_eq!(c.len(), 1, "{c:?}");
         assert_eq!(
             (c[0].channel, c[0].a, c[0].b),
             (2, EffectKind::ForceBias, EffectKind::ThrustGain)
         );
         assert!((c[0].rms_a - 8.3).abs() < 1e-9 && c[0].rms_sum < 0.5, "{c:?}");
-        let c = cancelling(
-            std::slice::from_ref(&d),
-            &[0],
-            &mask,
-            &kinds,
-            &[0.0, 0.0, 0.3, 0.05],
-            None,
-        );
+        let c = cancelling(&|_, f| f(0, &d), &[0], &mask, &kinds, &[0.0, 0.0, 0.3, 0.05], None);
         assert!(c.is_empty(), "{c:?}");
         // Opposite signs but small against the gap: not flagged (neither alone exceeds the gap).
-        let c = cancelling(
-            std::slice::from_ref(&d),
-            &[0],
-            &mask,
-            &kinds,
-            &[0.0, 0.0, 0.3, -0.03],
-            None,
-        );
+        let c = cancelling(&|_, f| f(0, &d), &[0], &mask, &kinds, &[0.0, 0.0, 0.3, -0.03], None);
         assert!(c.is_empty(), "{c:?}");
         // Restricted to another effect: nothing.
         let c = cancelling(
-            std::slice::from_ref(&d),
+            &|_, f| f(0, &d),
             &[0],
             &mask,
             &kinds,

@@ -5,16 +5,16 @@
 
 use super::augmented::Augmented;
 use super::catalogue::inputs::InputTransform;
-use super::catalogue::linear::{linear_kinds, linear_parameters, Context};
+use super::catalogue::linear::{linear_parameters, Context};
 use super::catalogue::EffectKind;
 use super::data::Prepared;
 use super::data::SegData;
-use super::design::seen_f;
-use super::design::{design, Design};
+use super::design::{seen_f, Design, SegBase, CHUNK};
 use super::fcache::SeenCache;
 use super::fit::Normal;
+use super::fit::MAX_LAG;
 use super::residuals::Base;
-use super::score::{sums_masked, Sums};
+use super::score::{sums_masked, taus, Sums};
 use super::DiagnoseOptions;
 use std::cell::RefCell;
 use std::ops::Range;
@@ -33,7 +33,7 @@ pub(crate) struct Fold {
 /// Everything fixed during the selection.
 pub(crate) struct Problem<'a> {
     pub base: &'a Base,
-    pub data: &'a Prepared,
+    pub data: &'a Prepared<'a>,
     /// The fits: with held-out logs one (train → holdout); with cross-validation one per fold and
     /// a last one on all training data (no test).
     pub fits: Vec<Fold>,
@@ -109,7 +109,7 @@ impl<'a> Problem<'a> {
     }
 
     /// f′ of `seg` under `tr` ([`seen_f`]), from the scan's cache when one is set.
-    pub fn seen_f(&self, seg: &SegData, tr: &InputTransform) -> Vec<[f64; 12]> {
+    pub fn seen_f(&self, seg: &SegData, tr: &InputTransform) -> Vec<[f64; 6]> {
         match &*self.seen.borrow() {
             Some(c) => c.seen_f(seg, self.base, tr),
             None => seen_f(seg, self.base, tr),
@@ -199,10 +199,16 @@ impl State {
     }
 }
 
-/// The current designs and residuals (per fit, per segment).
-pub(crate) struct Current {
-    pub designs: Vec<Design>,
-    pub residual: Vec<Vec<Vec<[f64; 6]>>>,
+/// The current model's fitting problem per segment ([`SegBase`]: r⁰ and f′'s v̇ under the
+/// state's transform; the linear columns and the residuals are computed from it when needed),
+/// and what every candidate of a round is scored against.
+pub(crate) struct Current<'d> {
+    pub segs: Vec<SegBase<'d>>,
+    /// The named linear effects and, per fit, their parameters (the state's).
+    pub linear: Vec<EffectKind>,
+    pub theta: Vec<Vec<f64>>,
+    /// Sums and τ of the current residuals ([`before`]; default outside the selection rounds).
+    pub before: Before,
     /// The base model's held-out sums (of the first round), the reference of the reduction rule.
     pub base_test: Sums,
     /// The held-out horizon errors of the model so far ([`super::horizon_rule`]; empty outside
@@ -210,78 +216,239 @@ pub(crate) struct Current {
     pub horizon: HorizonErrors,
 }
 
-pub(crate) fn current(p: &Problem, state: &State) -> Current {
+/// The current residuals, summed as the candidates are scored against them.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Before {
+    /// Per fit: its training sums (masked samples).
+    pub fit_train: Vec<Sums>,
+    /// The final fit's training τ per channel (lags up to [`MAX_LAG`]).
+    pub train_tau: [f64; 6],
+    /// The test fits' held-out sums (each fit's, added in fit order) and τ per channel (lags up
+    /// to the Savitzky-Golay window).
+    pub test: Sums,
+    pub test_tau: [f64; 6],
+}
+
+impl Before {
+    /// The final fit's training sums.
+    pub fn train(&self) -> Sums {
+        *self.fit_train.last().expect("the sums of every fit")
+    }
+}
+
+impl<'d> Current<'d> {
+    /// Fit `i`'s residual (the named linear corrections with its parameters) per segment.
+    pub fn residual(&self, p: &Problem, i: usize) -> Vec<Vec<[f64; 6]>> {
+        self.segs
+            .iter()
+            .map(|b| b.residual(&p.ctx, &self.linear, &self.theta[i]))
+            .collect()
+    }
+
+    /// Each fit's training sums of its residual.
+    pub fn train_sums(&self, p: &Problem) -> Vec<Sums> {
+        p.fits
+            .iter()
+            .enumerate()
+            .map(|(i, fold)| {
+                let mut sums = Sums::default();
+                for &s in &fold.train {
+                    self.segs[s].add_sums(&p.ctx, &self.linear, &self.theta[i], &p.mask[s], &mut sums);
+                }
+                sums
+            })
+            .collect()
+    }
+
+    /// The chunks of segment `s`'s design with the columns of `kinds` ([`SegBase::chunks`]).
+    pub fn chunks(&self, p: &Problem, s: usize, kinds: &[EffectKind], f: &mut dyn FnMut(usize, &Design)) {
+        self.segs[s].chunks(&p.ctx, kinds, CHUNK, f);
+    }
+}
+
+pub(crate) fn current<'d>(p: &Problem<'d>, state: &State) -> Current<'d> {
     let segs = p.data.variant(state.destale);
-    let kinds: Vec<EffectKind> = linear_kinds().collect();
-    let designs: Vec<Design> = segs
-        .iter()
-        .map(|s| design(s, p.base, &state.transform, &p.ctx, &kinds))
-        .collect();
-    let residual = state
-        .theta
-        .iter()
-        .map(|th| designs.iter().map(|d| d.residual(&state.linear, th)).collect())
-        .collect();
     Current {
-        designs,
-        residual,
+        segs: segs
+            .iter()
+            .map(|s| SegBase::under(s, &state.transform, || seen_f(s, p.base, &state.transform)))
+            .collect(),
+        linear: state.linear.clone(),
+        theta: state.theta.clone(),
+        before: Before::default(),
         base_test: Sums::default(),
         horizon: HorizonErrors::default(),
     }
 }
 
-/// Held-out sums of the current residuals over the test fits (scored samples).
-pub(crate) fn test_sums(p: &Problem, residual: &[Vec<Vec<[f64; 6]>>]) -> Sums {
-    let mut out = Sums::default();
-    for i in p.test_fits() {
-        out.add(&sums_masked(&residual[i], &p.fits[i].test, &p.mask));
+/// The sums and τ of the current residuals ([`Before`]), one fit's residual at a time.
+pub(crate) fn before(p: &Problem, cur: &Current) -> Before {
+    let fin = p.final_fit();
+    let all = [0, 1, 2, 3, 4, 5];
+    let mut out = Before::default();
+    let tests = p.test_fits();
+    let mut test_parts: Vec<Vec<[f64; 6]>> = Vec::new();
+    for (i, fold) in p.fits.iter().enumerate() {
+        let mut res = cur.residual(p, i);
+        out.fit_train.push(sums_masked(&res, &fold.train, &p.mask));
+        if i == fin {
+            let parts: Vec<&[[f64; 6]]> = fold.train.iter().map(|&t| res[t].as_slice()).collect();
+            out.train_tau = taus(&parts, &all, MAX_LAG);
+        }
+        if tests.contains(&i) {
+            out.test.add(&sums_masked(&res, &fold.test, &p.mask));
+            test_parts.extend(fold.test.iter().map(|&t| std::mem::take(&mut res[t])));
+        }
     }
+    let parts: Vec<&[[f64; 6]]> = test_parts.iter().map(Vec::as_slice).collect();
+    out.test_tau = taus(&parts, &all, p.options.savgol.window);
     out
 }
 
-/// Weighted least squares of the linear `kinds` on the vx vy vz residuals r⁰ of the `train`
-/// segments. Weights 1/MSE_c per channel, from `start` (the residual before), then once more from
-/// the fit's own residual. Returns θ, the unscaled covariance and the weights of the last pass.
+/// A candidate's residual summed as [`super::scored::finish`] scores it: the final fit's training
+/// sums and each test fit's held-out sums, over the masked samples, segments in order.
+#[derive(Clone, Debug)]
+pub(crate) struct AfterSums {
+    pub train: Sums,
+    /// Per fit (those that are not test fits stay empty).
+    pub test: Vec<Sums>,
+    role: Vec<Vec<Role>>,
+    fin: usize,
+}
+
+impl AfterSums {
+    pub fn new(p: &Problem, segments: usize) -> Self {
+        Self {
+            train: Sums::default(),
+            test: vec![Sums::default(); p.fits.len()],
+            role: roles(p, segments),
+            fin: p.final_fit(),
+        }
+    }
+
+    /// Whether fit `i`'s residual on segment `s` is counted.
+    pub fn wants(&self, i: usize, s: usize) -> bool {
+        match self.role[i][s] {
+            Role::Train => i == self.fin,
+            Role::Test => true,
+            Role::None => false,
+        }
+    }
+
+    /// Add fit `i`'s residual `res` of segment `s`, interior samples from `k0` (pieces of a
+    /// segment in order, segments in order).
+    pub fn add(&mut self, p: &Problem, i: usize, s: usize, k0: usize, res: &[[f64; 6]]) {
+        let mask = &p.mask[s][k0..k0 + res.len()];
+        match self.role[i][s] {
+            Role::Train if i == self.fin => self.train.push_masked(res, mask),
+            Role::Test => self.test[i].push_masked(res, mask),
+            _ => {}
+        }
+    }
+}
+
+/// The role of each segment in each fit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Role {
+    None,
+    Train,
+    Test,
+}
+
+pub(crate) fn roles(p: &Problem, n: usize) -> Vec<Vec<Role>> {
+    p.fits
+        .iter()
+        .map(|f| {
+            let mut r = vec![Role::None; n];
+            for &s in &f.train {
+                r[s] = Role::Train;
+            }
+            for &s in &f.test {
+                r[s] = Role::Test;
+            }
+            r
+        })
+        .collect()
+}
+
+/// Weighted least squares of the linear `kinds` on the vx vy vz residuals r⁰ of `segs` (per
+/// segment; [`SegBase::unused`] where no fit trains), for each of the training sets `trains`
+/// (ascending segment indices) at once. Weights 1/MSE_c per channel, from `start` (each fit's
+/// training sums before), then once more from the fit's own residual. Returns per training set
+/// θ, the unscaled covariance and the weights of the last pass. The columns are computed a chunk
+/// at a time and summed into the normal equations in the order of the samples.
 pub(crate) fn fit_linear(
-    designs: &[Design],
-    train: &[usize],
+    p: &Problem,
+    segs: &[SegBase],
+    trains: &[&[usize]],
     kinds: &[EffectKind],
-    start: &[Vec<[f64; 6]>],
+    start: &[Sums],
+) -> Vec<(Vec<f64>, nalgebra::DMatrix<f64>, [f64; 3])> {
+    fit_linear_chunked(&p.ctx, &p.mask, segs, trains, kinds, start, CHUNK)
+}
+
+/// [`fit_linear`] with columns computed `chunk` samples at a time (the result does not depend on it).
+pub(crate) fn fit_linear_chunked(
+    ctx: &Context,
     mask: &[Vec<bool>],
-) -> (Vec<f64>, nalgebra::DMatrix<f64>, [f64; 3]) {
+    segs: &[SegBase],
+    trains: &[&[usize]],
+    kinds: &[EffectKind],
+    start: &[Sums],
+    chunk: usize,
+) -> Vec<(Vec<f64>, nalgebra::DMatrix<f64>, [f64; 3])> {
     let p: usize = kinds.iter().map(|k| super::catalogue::linear::columns(*k)).sum();
-    let weights_of = |res: &[Vec<[f64; 6]>]| -> [f64; 3] {
-        let s = sums_masked(res, train, mask);
+    let weights_of = |s: &Sums| -> [f64; 3] {
         let mse = s.mse();
         std::array::from_fn(|c| if mse[c] > 0.0 { 1.0 / mse[c] } else { 1.0 })
     };
-    let mut w = weights_of(start);
-    let mut out = (vec![0.0; p], nalgebra::DMatrix::zeros(p, p));
+    debug_assert!(trains.iter().all(|t| t.windows(2).all(|w| w[0] < w[1])));
+    // users[s]: the training sets that hold segment s.
+    let users: Vec<Vec<usize>> = (0..segs.len())
+        .map(|s| (0..trains.len()).filter(|&i| trains[i].contains(&s)).collect())
+        .collect();
+    let mut w: Vec<[f64; 3]> = start.iter().map(weights_of).collect();
+    let mut out: Vec<(Vec<f64>, nalgebra::DMatrix<f64>)> =
+        vec![(vec![0.0; p], nalgebra::DMatrix::zeros(p, p)); trains.len()];
     for pass in 0..2 {
-        let mut ne = Normal::new(p);
+        let mut ne: Vec<Normal> = (0..trains.len()).map(|_| Normal::new(p)).collect();
         let mut row = vec![0.0; p];
-        for &s in train {
-            let d = &designs[s];
-            let cols: Vec<&Vec<[f64; 3]>> = kinds.iter().flat_map(|k| d.columns_of(*k)).collect();
-            for (k, r) in d.r0.iter().enumerate() {
-                if !mask[s][k] {
-                    continue;
-                }
-                for c in 0..3 {
-                    for (i, col) in cols.iter().enumerate() {
-                        row[i] = col[k][c];
+        for (s, base) in segs.iter().enumerate() {
+            if users[s].is_empty() {
+                continue;
+            }
+            base.chunks(ctx, kinds, chunk, |k0, d| {
+                let cols: Vec<&Vec<[f64; 3]>> = kinds.iter().flat_map(|k| d.columns_of(*k)).collect();
+                for &i in &users[s] {
+                    for (k, r) in d.r0.iter().enumerate() {
+                        if !mask[s][k0 + k] {
+                            continue;
+                        }
+                        for c in 0..3 {
+                            for (q, col) in cols.iter().enumerate() {
+                                row[q] = col[k][c];
+                            }
+                            ne[i].add(&row, r[c], w[i][c]);
+                        }
                     }
-                    ne.add(&row, r[c], w[c]);
                 }
+            });
+        }
+        out = ne.iter().map(Normal::solve).collect();
+        if pass == 0 {
+            for (i, train) in trains.iter().enumerate() {
+                let mut sums = Sums::default();
+                for &s in train.iter() {
+                    segs[s].add_sums(ctx, kinds, &out[i].0, &mask[s], &mut sums);
+                }
+                w[i] = weights_of(&sums);
             }
         }
-        out = ne.solve();
-        if pass == 0 {
-            let res: Vec<Vec<[f64; 6]>> = designs.iter().map(|d| d.residual(kinds, &out.0)).collect();
-            w = weights_of(&res);
-        }
     }
-    (out.0, out.1, w)
+    out.into_iter()
+        .zip(w)
+        .map(|((theta, cov), w)| (theta, cov, w))
+        .collect()
 }
 
 /// Pooled horizon errors of one model on the held-out data.
@@ -321,5 +488,168 @@ impl HorizonErrors {
             )),
             _ => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::catalogue::linear::{columns, regressors, Sample};
+    use crate::diagnose::design::vertical_only;
+    use crate::diagnose::residuals::{filter, ResidualKind};
+    use crate::identify::preprocess::SavGol;
+
+    /// A 150-row log of smooth manoeuvres (airborne but for a few rows near the ground) and the
+    /// M100 SINDy model.
+    fn setup() -> (Base, Vec<crate::logs::FlightLog>) {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/sindy_m100.json");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let model = crate::model::parse(&text, "sindy_m100.json").unwrap();
+        let base = Base::new(&model, None, None);
+        let mut csv = String::from(
+            "t,x,y,z,roll,pitch,yaw,vx,vy,vz,roll_rate,pitch_rate,yaw_rate,u_vz,u_roll,u_pitch,u_yaw_rate\n",
+        );
+        for k in 0..150 {
+            let t = k as f64 * 0.05;
+            let s = |w: f64, a: f64| a * (w * t).sin();
+            let z = if (40..44).contains(&k) { 0.0 } else { 2.0 + s(0.7, 0.5) };
+            let row = [
+                t,
+                s(0.3, 2.0),
+                s(0.2, 1.0),
+                z,
+                s(1.1, 0.1),
+                s(0.9, 0.12),
+                s(0.4, 0.5),
+                s(0.3, 0.6) + 0.5,
+                s(0.2, 0.2) - 0.3,
+                s(0.7, 0.35),
+                s(1.1, 0.11),
+                s(0.9, 0.1),
+                s(0.4, 0.2),
+                s(0.8, 0.4),
+                s(1.3, 0.1),
+                s(1.0, 0.1),
+                s(0.5, 0.3),
+            ];
+            let line: Vec<String> = row.iter().map(|v| format!("{v}")).collect();
+            csv.push_str(&line.join(","));
+            csv.push('\n');
+        }
+        let log = crate::logs::parse_log(&csv, "chunks.csv").unwrap();
+        (base, vec![log])
+    }
+
+    /// The linear columns, residuals, sums and normal equations computed `CHUNK` samples at a time
+    /// are those of the whole segment's columns computed directly, to the bit, for chunks of 1, 7
+    /// and more than the samples.
+    #[test]
+    fn chunked_designs_equal_the_direct_columns() {
+        let (base, logs) = setup();
+        let savgol = SavGol { window: 9, order: 3 };
+        let data = super::super::data::prepare(&base, &savgol, ResidualKind::Matched, &logs, &[], 1).unwrap();
+        let seg = &data.raw[0];
+        let ctx = Context {
+            gravity: base.gravity,
+            rotor_radius: 0.5,
+        };
+        let mut transform = InputTransform::of_base(&base);
+        transform.delay[0] = 0.07;
+        transform.lag[1] = Some(0.1);
+        let fs = seen_f(seg, &base, &transform);
+        let kinds: Vec<EffectKind> = vec![
+            EffectKind::LinearDrag,
+            EffectKind::QuadraticDrag,
+            EffectKind::ForceBias,
+            EffectKind::ThrustGain,
+            EffectKind::ThrustDecay,
+            EffectKind::GroundEffect,
+        ];
+        let p: usize = kinds.iter().map(|k| columns(*k)).sum();
+        let theta: Vec<f64> = (0..p)
+            .map(|i| 0.01 * (i as f64 + 1.0) * if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let sb = SegBase::new(seg, &fs);
+        let n = seg.len();
+        let interior = n - 2 * seg.h;
+        assert!(seg.airborne.iter().any(|a| !a), "some samples are masked");
+        // Direct: every column over the whole segment, then r = r⁰ − Σ θ col.
+        let mut direct: Vec<Vec<[f64; 3]>> = Vec::new();
+        for &kind in &kinds {
+            let q = columns(kind);
+            let mut point = vec![vec![[0.0; 3]; n]; q];
+            let mut buf = [[0.0; 3]; 3];
+            for m in 0..n {
+                let s = Sample {
+                    x: &seg.x[m],
+                    base_acc: [fs[m][0], fs[m][1], fs[m][2]],
+                    flight_time: seg.flight_time(m),
+                };
+                regressors(kind, &s, &ctx, &mut buf[..q]);
+                if vertical_only(kind) {
+                    for b in &mut buf[..q] {
+                        b[0] = 0.0;
+                        b[1] = 0.0;
+                    }
+                }
+                for i in 0..q {
+                    point[i][m] = buf[i];
+                }
+            }
+            direct.extend(point.iter().map(|c| filter(&seg.kernel, c, n)));
+        }
+        let mut r_direct: Vec<[f64; 6]> = sb.r0().to_vec();
+        for (col, th) in direct.iter().zip(&theta) {
+            for (r, c) in r_direct.iter_mut().zip(col) {
+                for ch in 0..3 {
+                    r[ch] -= th * c[ch];
+                }
+            }
+        }
+        let mut sums_direct = Sums::default();
+        sums_direct.push_masked(&r_direct, &seg.airborne);
+        let w = [2.0, 3.0, 0.5];
+        let mask = vec![seg.airborne.clone()];
+        let start = Sums {
+            sse: [1.0 / w[0], 1.0 / w[1], 1.0 / w[2], 1.0, 1.0, 1.0],
+            n: 1,
+        };
+        let mut fits = Vec::new();
+        for chunk in [1, 7, interior + 5] {
+            let mut cols: Vec<Vec<[f64; 3]>> = vec![Vec::new(); p];
+            let mut r = Vec::new();
+            sb.chunks(&ctx, &kinds, chunk, |k0, d| {
+                assert_eq!(k0, r.len());
+                let flat: Vec<&Vec<[f64; 3]>> = kinds.iter().flat_map(|k| d.columns_of(*k)).collect();
+                for (i, c) in flat.iter().enumerate() {
+                    cols[i].extend_from_slice(c);
+                }
+                r.extend(d.residual(&kinds, &theta));
+            });
+            assert_eq!(cols, direct, "chunk {chunk}: columns");
+            assert_eq!(r, r_direct, "chunk {chunk}: residual");
+            let fit = fit_linear_chunked(&ctx, &mask, std::slice::from_ref(&sb), &[&[0]], &kinds, &[start], chunk);
+            fits.push(fit.into_iter().next().unwrap());
+        }
+        let mut sums = Sums::default();
+        sb.add_sums(&ctx, &kinds, &theta, &seg.airborne, &mut sums);
+        assert_eq!(sums, sums_direct);
+        assert_eq!(sb.residual(&ctx, &kinds, &theta), r_direct);
+        // Every chunk size gives the same two-pass weighted fit: the direct normal equations'
+        // solution with the weights of the last pass.
+        assert!(fits
+            .windows(2)
+            .all(|f| f[0].0 == f[1].0 && f[0].1 == f[1].1 && f[0].2 == f[1].2));
+        let mut ne1 = Normal::new(p);
+        let w1 = fits[0].2;
+        for k in 0..interior {
+            if seg.airborne[k] {
+                for c in 0..3 {
+                    let row: Vec<f64> = direct.iter().map(|col| col[k][c]).collect();
+                    ne1.add(&row, sb.r0()[k][c], w1[c]);
+                }
+            }
+        }
+        assert_eq!(ne1.solve().0, fits[0].0);
     }
 }

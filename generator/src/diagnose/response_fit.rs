@@ -19,11 +19,13 @@
 
 use super::catalogue::inputs::InputTransform;
 use super::catalogue::EffectKind;
-use super::fit::{profile_sigma, MAX_LAG};
+use super::data::SegData;
+use super::design::SegBase;
+use super::fit::profile_sigma;
 use super::horizon_rule::horizon_errors;
-use super::problem::{Current, Problem, State};
+use super::problem::{AfterSums, Current, Problem, State};
 use super::residuals::filter;
-use super::score::{lr_z, sums_masked, taus, Rules, Sums};
+use super::score::{lr_z, Rules, Sums};
 use super::scored::{finish, under, Candidate, ChannelFit, Install, Params, Scored};
 
 /// The longest delay scanned is at least this, s.
@@ -54,36 +56,36 @@ fn with(tr: &InputTransform, j: usize, d: f64, tau: f64, gain: Option<f64>) -> I
     t
 }
 
-/// The filtered gain regressor of input j under `tr` at every segment's interior samples.
-fn gain_columns(p: &Problem, state: &State, tr: &InputTransform, j: usize) -> Vec<Vec<[f64; 6]>> {
-    p.data
-        .variant(state.destale)
+/// The filtered gain regressor of input j under `tr` at a segment's interior samples.
+fn gain_column(p: &Problem, seg: &SegData, tr: &InputTransform, j: usize) -> Vec<[f64; 6]> {
+    let u = tr.apply(&seg.u, seg.dt);
+    let g: Vec<[f64; 6]> = seg
+        .x
         .iter()
-        .map(|seg| {
-            let u = tr.apply(&seg.u, seg.dt);
-            let g: Vec<[f64; 6]> = seg
-                .x
-                .iter()
-                .zip(&u)
-                .map(|(x, u)| {
-                    let f = tr.model_f(p.base, x, u);
-                    let mut u0 = *u;
-                    u0[j] = 0.0;
-                    let f0 = tr.model_f(p.base, x, &u0);
-                    std::array::from_fn(|c| f[6 + c] - f0[6 + c])
-                })
-                .collect();
-            filter(&seg.kernel, &g, seg.len())
+        .zip(&u)
+        .map(|(x, u)| {
+            let f = tr.model_f(p.base, x, u);
+            let mut u0 = *u;
+            u0[j] = 0.0;
+            let f0 = tr.model_f(p.base, x, &u0);
+            std::array::from_fn(|c| f[6 + c] - f0[6 + c])
         })
-        .collect()
+        .collect();
+    filter(&seg.kernel, &g, seg.len())
 }
 
-/// Least squares of the residual `res` on `cols` over the rows `aff` of the training segments:
-/// (a, σ²-free variance 1/ΦᵀΦ); the gain is 1 + a.
-fn gain_fit(p: &Problem, res: &[Vec<[f64; 6]>], cols: &[Vec<[f64; 6]>], train: &[usize], aff: &[usize]) -> (f64, f64) {
+/// Least squares of the final fit's residual under `tr` on input j's gain column over the rows
+/// `aff` of its training segments, one segment at a time: (a, σ²-free variance 1/ΦᵀΦ); the gain
+/// is 1 + a.
+fn gain_fit(p: &Problem, state: &State, tr: &InputTransform, j: usize, aff: &[usize]) -> (f64, f64) {
+    let fin = p.final_fit();
+    let segs = p.data.variant(state.destale);
     let (mut aa, mut ab) = (0.0, 0.0);
-    for &s in train {
-        for (k, (r, c)) in res[s].iter().zip(&cols[s]).enumerate() {
+    for &s in &p.fits[fin].train {
+        let seg = &segs[s];
+        let res = SegBase::under(seg, tr, || p.seen_f(seg, tr)).residual(&p.ctx, &state.linear, &state.theta[fin]);
+        let col = gain_column(p, seg, tr, j);
+        for (k, (r, c)) in res.iter().zip(&col).enumerate() {
             if p.mask[s][k] {
                 for &ch in aff {
                     aa += c[ch] * c[ch];
@@ -130,7 +132,7 @@ fn scan(p: &Problem, state: &State, j: usize, aff: &[usize], tau_c: &[f64; 6], s
         {
             return;
         }
-        let (sums, _) = under(p, state, &with(&state.transform, j, d, tau, None), false);
+        let sums = under(p, state, &with(&state.transform, j, d, tau, None), None);
         points.push((d, tau, sums[fin].0));
     };
     let best_of = |points: &[(f64, f64, Sums)]| -> usize {
@@ -204,11 +206,8 @@ fn scan(p: &Problem, state: &State, j: usize, aff: &[usize], tau_c: &[f64; 6], s
 /// Evaluate `channel_response` against `state`; `seeds[j]`: the cross-correlation's delay of
 /// input j, if the "where" analysis found one.
 pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules) -> Candidate {
-    let fin = p.final_fit();
-    let train = &p.fits[fin].train;
-    let before_parts: Vec<&[[f64; 6]]> = train.iter().map(|&s| cur.residual[fin][s].as_slice()).collect();
-    let tau_c = taus(&before_parts, &[0, 1, 2, 3, 4, 5], MAX_LAG);
-    let before = sums_masked(&cur.residual[fin], train, &p.mask);
+    let tau_c = cur.before.train_tau;
+    let before = cur.before.train();
     let mut fits: Vec<ChannelFit> = Vec::new();
     let mut affs: Vec<Vec<usize>> = Vec::new();
     for j in 0..4 {
@@ -219,9 +218,7 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
         let seed = p.seeds[j];
         let sc = scan(p, state, j, &aff, &tau_c, seed);
         let tr = with(&state.transform, j, sc.delay, sc.lag, None);
-        let (_, res) = under(p, state, &tr, true);
-        let cols = gain_columns(p, state, &tr, j);
-        let (a, var) = gain_fit(p, &res[fin], &cols, train, &aff);
+        let (a, var) = gain_fit(p, state, &tr, j, &aff);
         let z = lr_z(&before, &sc.train_after, &tau_c, &aff);
         let moved = sc.delay > 0.0 || sc.lag > 0.0;
         let not_kept = if !moved {
@@ -294,7 +291,8 @@ pub(crate) fn evaluate(p: &Problem, state: &State, cur: &Current, rules: &Rules)
         }
     }
     let transform = accepted.0;
-    let (_, after) = under(p, state, &transform, true);
+    let mut after = AfterSums::new(p, p.data.variant(state.destale).len());
+    under(p, state, &transform, Some(&mut after));
     let mut channels: Vec<usize> = used.iter().flat_map(|&q| affs[q].clone()).collect();
     channels.sort_unstable();
     channels.dedup();

@@ -66,6 +66,19 @@ impl Sums {
         self.n += o.n;
     }
 
+    /// Add the samples of `res` that `mask` marks, one at a time (continuing the running sums:
+    /// a residual given in pieces sums as in one).
+    pub fn push_masked(&mut self, res: &[[f64; 6]], mask: &[bool]) {
+        for (r, keep) in res.iter().zip(mask) {
+            if *keep {
+                for c in 0..6 {
+                    self.sse[c] += r[c] * r[c];
+                }
+                self.n += 1;
+            }
+        }
+    }
+
     pub fn mse(&self) -> [f64; 6] {
         let n = self.n.max(1) as f64;
         self.sse.map(|s| s / n)
@@ -94,14 +107,7 @@ pub fn sums(res: &[Vec<[f64; 6]>], segs: &[usize]) -> Sums {
 pub fn sums_masked(res: &[Vec<[f64; 6]>], segs: &[usize], mask: &[Vec<bool>]) -> Sums {
     let mut out = Sums::default();
     for &s in segs {
-        for (r, keep) in res[s].iter().zip(&mask[s]) {
-            if *keep {
-                for c in 0..6 {
-                    out.sse[c] += r[c] * r[c];
-                }
-                out.n += 1;
-            }
-        }
+        out.push_masked(&res[s], &mask[s]);
     }
     out
 }

@@ -5,11 +5,11 @@
 
 use super::catalogue::inputs::InputTransform;
 use super::catalogue::EffectKind;
-use super::design::design_from;
-use super::fit::MAX_LAG;
+use super::design::{SegBase, CHUNK};
 use super::horizon_rule::horizon_errors;
+pub(crate) use super::problem::{roles, AfterSums, Role};
 use super::problem::{Current, HorizonErrors, Problem, State};
-use super::score::{delta_bic, lr_z, reduction, sums_masked, taus, Rules, Sums};
+use super::score::{delta_bic, lr_z, reduction, Rules, Sums};
 
 /// A scanned input parameter of one channel.
 #[derive(Clone, Debug, PartialEq)]
@@ -104,9 +104,6 @@ pub(crate) struct Candidate {
     pub reasons: Vec<String>,
 }
 
-/// Per-fit residuals after the candidate, per segment (empty where not needed).
-pub(crate) type After = Vec<Vec<Vec<[f64; 6]>>>;
-
 pub(crate) struct Scored {
     pub kind: EffectKind,
     pub channels: Vec<usize>,
@@ -132,23 +129,19 @@ fn floored(mut s: Sums, floor: &[f64; 6]) -> Sums {
     s
 }
 
-pub(crate) fn finish(p: &Problem, cur: &Current, after: &After, s: Scored, rules: &Rules) -> Candidate {
-    let fin = p.final_fit();
-    let train = &p.fits[fin].train;
-    let train_before = sums_masked(&cur.residual[fin], train, &p.mask);
-    let train_after = sums_masked(&after[fin], train, &p.mask);
+pub(crate) fn finish(p: &Problem, cur: &Current, after: &AfterSums, s: Scored, rules: &Rules) -> Candidate {
+    let before = &cur.before;
+    let train_before = before.train();
+    let train_after = after.train;
     // τ of the residual before the candidate: one sample size for every candidate of a round
     // (the residual after would reward a candidate for leaving a rougher residual).
-    let parts: Vec<&[[f64; 6]]> = train.iter().map(|&t| cur.residual[fin][t].as_slice()).collect();
-    let train_tau = taus(&parts, &s.scored, MAX_LAG);
-    let (mut test_before, mut test_after) = (Sums::default(), Sums::default());
-    let mut test_parts: Vec<&[[f64; 6]]> = Vec::new();
+    let train_tau = before.train_tau;
+    let test_before = before.test;
+    let mut test_after = Sums::default();
     for i in p.test_fits() {
-        test_before.add(&sums_masked(&cur.residual[i], &p.fits[i].test, &p.mask));
-        test_after.add(&sums_masked(&after[i], &p.fits[i].test, &p.mask));
-        test_parts.extend(p.fits[i].test.iter().map(|&t| cur.residual[i][t].as_slice()));
+        test_after.add(&after.test[i]);
     }
-    let test_tau = taus(&test_parts, &s.scored, p.options.savgol.window);
+    let test_tau = before.test_tau;
     let (train_before, train_after) = (floored(train_before, &p.floor), floored(train_after, &p.floor));
     let (test_before, test_after) = (floored(test_before, &p.floor), floored(test_after, &p.floor));
     let mean_n_eff = |n: usize, tau: &[f64; 6]| {
@@ -224,60 +217,45 @@ pub(crate) fn finish(p: &Problem, cur: &Current, after: &After, s: Scored, rules
     }
 }
 
-/// The role of each segment in each fit.
-#[derive(Clone, Copy, PartialEq)]
-pub(crate) enum Role {
-    None,
-    Train,
-    Test,
-}
-
-pub(crate) fn roles(p: &Problem, n: usize) -> Vec<Vec<Role>> {
-    p.fits
-        .iter()
-        .map(|f| {
-            let mut r = vec![Role::None; n];
-            for &s in &f.train {
-                r[s] = Role::Train;
-            }
-            for &s in &f.test {
-                r[s] = Role::Test;
-            }
-            r
-        })
-        .collect()
-}
-
 /// The model `state` describes with the input transform `tr`: per fit, the (training, held-out)
-/// sums of its residuals and, with `keep`, the residuals themselves (per fit, per segment; empty
-/// for segments the fit does not use).
-pub(crate) fn under(p: &Problem, state: &State, tr: &InputTransform, keep: bool) -> (Vec<(Sums, Sums)>, After) {
+/// sums of its residuals (each segment's sums added in turn), and, given `after`, the residuals
+/// summed into it as [`finish`] scores them.
+pub(crate) fn under(
+    p: &Problem,
+    state: &State,
+    tr: &InputTransform,
+    mut after: Option<&mut AfterSums>,
+) -> Vec<(Sums, Sums)> {
     let segs = p.data.variant(state.destale);
     let role = roles(p, segs.len());
     let mut sums = vec![(Sums::default(), Sums::default()); p.fits.len()];
-    let mut after: After = vec![vec![Vec::new(); segs.len()]; p.fits.len()];
     for (s, seg) in segs.iter().enumerate() {
         if role.iter().all(|r| r[s] == Role::None) {
             continue;
         }
-        let fs = p.seen_f(seg, tr);
-        let d = design_from(seg, &fs, &p.ctx, &state.linear);
-        for (i, th) in state.theta.iter().enumerate() {
-            if role[i][s] == Role::None {
-                continue;
+        let b = SegBase::under(seg, tr, || p.seen_f(seg, tr));
+        let mut one = vec![Sums::default(); p.fits.len()];
+        b.chunks(&p.ctx, &state.linear, CHUNK, |k0, d| {
+            for (i, th) in state.theta.iter().enumerate() {
+                if role[i][s] == Role::None {
+                    continue;
+                }
+                let res = d.residual(&state.linear, th);
+                one[i].push_masked(&res, &p.mask[s][k0..k0 + res.len()]);
+                if let Some(a) = after.as_deref_mut() {
+                    a.add(p, i, s, k0, &res);
+                }
             }
-            let res = d.residual(&state.linear, th);
-            let one = sums_masked(std::slice::from_ref(&res), &[0], std::slice::from_ref(&p.mask[s]));
+        });
+        for (i, one) in one.iter().enumerate() {
             match role[i][s] {
-                Role::Train => sums[i].0.add(&one),
-                _ => sums[i].1.add(&one),
-            }
-            if keep {
-                after[i][s] = res;
+                Role::None => {}
+                Role::Train => sums[i].0.add(one),
+                Role::Test => sums[i].1.add(one),
             }
         }
     }
-    (sums, after)
+    sums
 }
 
 /// A fitted channel, for the report.

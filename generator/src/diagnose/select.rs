@@ -14,10 +14,10 @@
 use super::candidate::evaluate;
 use super::catalogue::inputs::LAG_CHANNELS;
 use super::catalogue::EffectKind;
-use super::design::{design_from, Design};
+use super::design::SegBase;
 use super::horizon_rule::horizon_errors;
-use super::problem::{current, fit_linear, test_sums, Problem, State};
-use super::score::{sums_masked, Rules, Sums};
+use super::problem::{before, current, fit_linear, Problem, State};
+use super::score::{Rules, Sums};
 use super::scored::{Candidate, Install};
 use crate::logs::StalePolicy;
 
@@ -27,8 +27,9 @@ fn refit(p: &Problem, state: &mut State) {
         return;
     }
     let cur = current(p, state);
-    for (i, fold) in p.fits.iter().enumerate() {
-        let (theta, _, _) = fit_linear(&cur.designs, &fold.train, &state.linear, &cur.residual[i], &p.mask);
+    let trains: Vec<&[usize]> = p.fits.iter().map(|f| f.train.as_slice()).collect();
+    let fitted = fit_linear(p, &cur.segs, &trains, &state.linear, &cur.train_sums(p));
+    for (i, (theta, _, _)) in fitted.into_iter().enumerate() {
         state.theta[i] = theta;
     }
 }
@@ -90,28 +91,32 @@ fn backfit(p: &Problem, state: &mut State) {
                     EffectKind::Latency => tr.delay[j] = g,
                     _ => tr.set_lag(j, Some(g)),
                 }
-                let designs: Vec<Design> = segs
+                let bases: Vec<SegBase> = segs
                     .iter()
                     .enumerate()
                     .map(|(s, seg)| {
                         if train.contains(&s) {
-                            design_from(seg, &p.seen_f(seg, &tr), &p.ctx, &state.linear)
+                            SegBase::under(seg, &tr, || p.seen_f(seg, &tr))
                         } else {
-                            Design {
-                                r0: Vec::new(),
-                                cols: state.linear.iter().map(|k| (*k, Vec::new())).collect(),
-                            }
+                            SegBase::unused(seg)
                         }
                     })
                     .collect();
-                let res: Vec<Vec<[f64; 6]>> = if state.linear.is_empty() {
-                    designs.iter().map(|d| d.r0.clone()).collect()
+                let mut start = Sums::default();
+                for &s in &train {
+                    bases[s].add_sums(&p.ctx, &[], &[], &p.mask[s], &mut start);
+                }
+                let s = if state.linear.is_empty() {
+                    start
                 } else {
-                    let start: Vec<Vec<[f64; 6]>> = designs.iter().map(|d| d.r0.clone()).collect();
-                    let (theta, _, _) = fit_linear(&designs, &train, &state.linear, &start, &p.mask);
-                    designs.iter().map(|d| d.residual(&state.linear, &theta)).collect()
+                    let fitted = fit_linear(p, &bases, &[&train], &state.linear, &[start]);
+                    let theta = &fitted[0].0;
+                    let mut s = Sums::default();
+                    for &t in &train {
+                        bases[t].add_sums(&p.ctx, &state.linear, theta, &p.mask[t], &mut s);
+                    }
+                    s
                 };
-                let s = sums_masked(&res, &train, &p.mask);
                 let objective: f64 = s.sse.iter().map(|v| v.max(1e-300).ln()).sum();
                 if objective < best.0 {
                     best = (objective, g);
@@ -205,9 +210,11 @@ fn stale_first(p: &Problem, state: &mut State, rounds: &mut Vec<Round>, rules: &
         return false;
     }
     let mut cur = current(p, state);
-    cur.base_test = test_sums(p, &cur.residual);
+    cur.before = before(p, &cur);
+    cur.base_test = cur.before.test;
     cur.horizon = horizon_errors(p, state);
     let c = evaluate(p, state, &cur, EffectKind::StaleSamples, rules);
+    drop(cur);
     rounds.push(Round {
         candidates: vec![c.clone()],
         named: Some(EffectKind::StaleSamples),
@@ -243,7 +250,8 @@ pub(crate) fn select(
             break;
         }
         let mut cur = current(p, &state);
-        let base = *base_test.get_or_insert_with(|| test_sums(p, &cur.residual));
+        cur.before = before(p, &cur);
+        let base = *base_test.get_or_insert(cur.before.test);
         cur.base_test = base;
         cur.horizon = horizon_errors(p, &state);
         // The total grows by a round's candidates as rounds start.
@@ -255,6 +263,7 @@ pub(crate) fn select(
             done += 1;
         }
         progress(done, total, "");
+        drop(cur);
         let mut best = candidates
             .iter()
             .filter(|c| c.significant)

@@ -67,14 +67,14 @@ pub(crate) fn one_step_residual(aug: &Augmented, seg: &SegData) -> Vec<[f64; 6]>
             .interior()
             .zip(&seg.dx)
             .map(|(k, d)| {
-                let f = aug.f(&seg.x[k], &seen.s[k], seg.flight_time[k], &seen.v[k]);
+                let f = aug.f(&seg.x[k], &seen.s[k], seg.flight_time(k), &seen.v[k]);
                 std::array::from_fn(|c| d[c] - f[6 + c])
             })
             .collect();
     }
     let mut e = vec![[0.0; 6]; n];
     for k in 0..n - 1 {
-        let (next, _) = aug.step(&seg.x[k], &seen.s[k], seg.flight_time[k], &seen.v[k], seg.dt, m);
+        let (next, _) = aug.step(&seg.x[k], &seen.s[k], seg.flight_time(k), &seen.v[k], seg.dt, m);
         e[k] = std::array::from_fn(|c| (seg.x[k + 1][6 + c] - next[6 + c]) / seg.dt);
     }
     filter(&seg.kernel, &e, n)
@@ -93,7 +93,7 @@ pub(crate) fn run(
     let (mut x, mut s) = (seg.x[k], seen.s[k]);
     let mut out = Vec::with_capacity(len);
     for j in 0..len {
-        let (nx, ns) = aug.step(&x, &s, seg.flight_time[k + j], &seen.v[k + j], seg.dt, m);
+        let (nx, ns) = aug.step(&x, &s, seg.flight_time(k + j), &seen.v[k + j], seg.dt, m);
         if !finite(&nx) {
             break;
         }
@@ -122,7 +122,7 @@ pub(crate) fn pools<'d>(
     p: &Problem,
     state: &State,
     before_raw: bool,
-    seg: impl Fn(usize, bool) -> Option<&'d SegData>,
+    seg: impl Fn(usize, bool) -> Option<&'d SegData<'d>>,
 ) -> (Side, Side) {
     let plain = Augmented::plain(p.base, p.ctx);
     let base_variant = state.destale && !before_raw;

@@ -29,7 +29,17 @@ pub(crate) fn where_input(base: &Augmented, segs: &[&SegData], horizon: usize, l
     dts.sort_by(f64::total_cmp);
     input.dt = dts.get(dts.len() / 2).copied().unwrap_or(0.0);
     let with_voltage = segs.iter().all(|s| s.volt.is_some());
-    let mut volt = Vec::new();
+    // Every series is sized once (grown by doubling they would hold up to twice the samples).
+    let total: usize = segs.iter().map(|s| s.interior().len()).sum();
+    input.states.reserve_exact(total);
+    input.inputs.reserve_exact(total);
+    input.time_in_flight.reserve_exact(total);
+    input.stale.reserve_exact(total);
+    for c in 0..6 {
+        input.one_step[c].reserve_exact(total);
+        input.horizon.as_mut().expect("set above")[c].reserve_exact(total);
+    }
+    let mut volt = Vec::with_capacity(if with_voltage { total } else { 0 });
     for seg in segs {
         input.segment_starts.push(input.states.len());
         let seen = base.seen_inputs(seg);
@@ -37,7 +47,7 @@ pub(crate) fn where_input(base: &Augmented, segs: &[&SegData], horizon: usize, l
         for (i, k) in seg.interior().enumerate() {
             input.states.push(seg.x[k]);
             input.inputs.push(seg.u[k]);
-            input.time_in_flight.push(seg.segment_time[k]);
+            input.time_in_flight.push(seg.segment_time(k));
             input.stale.push(seg.stale[k]);
             if let Some(v) = &seg.volt {
                 volt.push(v[k]);

@@ -85,8 +85,11 @@ impl Diagnosis {
         let bar = tmp.join("rmse_before_after.svg");
         plots::before_after(&self.shrink, &bar).map_err(|e| io(&bar, e))?;
         plot_files.push("rmse_before_after.svg".to_string());
-        if let (Some(report), Some(input)) = (&self.where_report, &self.where_input) {
-            let files = crate::analysis::write_plots(report, input, tmp).map_err(|e| io(tmp, e))?;
+        if let Some(report) = &self.where_report {
+            // The "where" plots draw from the report alone; its input series are not kept (see
+            // `where_analysis`).
+            let input = crate::analysis::WhereInput::default();
+            let files = crate::analysis::write_plots(report, &input, tmp).map_err(|e| io(tmp, e))?;
             for f in files {
                 if let Some(n) = f.file_name() {
                     plot_files.push(n.to_string_lossy().into_owned());

@@ -117,17 +117,18 @@ impl InputTransform {
             .fold(f64::INFINITY, f64::min)
     }
 
-    /// The acceleration lags applied to f′ (one row per sample; `ends`: the base rows at the end
-    /// of each sample under its input): each lagged row c gets the interval average of its lag
-    /// minus that of the row, the row going linearly between the two ends ([`row_lag`]).
-    pub fn lag_rows(&self, f: &mut [[f64; 12]], ends: &[[f64; 12]], dt: f64) {
+    /// The acceleration lags applied to the dynamic rows vx..yaw_rate of f′ (one row per sample;
+    /// `ends`: the base rows at the end of each sample under its input): each lagged row c gets the
+    /// interval average of its lag minus that of the row, the row going linearly between the two
+    /// ends ([`row_lag`]).
+    pub fn lag_rows(&self, f: &mut [[f64; 6]], ends: &[[f64; 6]], dt: f64) {
         for c in 0..6 {
             if let Some(tau) = self.accel_lag[c] {
-                let b0: Vec<f64> = f.iter().map(|r| r[6 + c]).collect();
-                let b1: Vec<f64> = ends.iter().map(|r| r[6 + c]).collect();
+                let b0: Vec<f64> = f.iter().map(|r| r[c]).collect();
+                let b1: Vec<f64> = ends.iter().map(|r| r[c]).collect();
                 let (_, correction) = row_lag(&b0, &b1, dt, tau);
                 for (r, d) in f.iter_mut().zip(correction) {
-                    r[6 + c] += d;
+                    r[c] += d;
                 }
             }
         }
