@@ -137,6 +137,39 @@ pub struct LoopRefinement {
     pub note: Option<String>,
 }
 
+/// `provenance.loop_refinement`: the options and, per loop, its verdict, held-out RMSE and the
+/// fitted coefficients it started from under `fitted_as` (`sparse_fit` for SINDy,
+/// `equation_error_fit` for PD).
+pub fn record(options: &RefineOptions, loops: &[LoopRefinement], fitted_as: &str) -> serde_json::Value {
+    let loops: serde_json::Map<String, serde_json::Value> = loops
+        .iter()
+        .map(|r| {
+            let fitted: serde_json::Map<_, _> = r
+                .terms
+                .iter()
+                .map(|(t, a, _)| (t.clone(), serde_json::json!(a)))
+                .collect();
+            let mut entry = serde_json::json!({
+                "judged_by": r.output,
+                "held_out_free_run_rmse": [r.held_out_rmse.0, r.held_out_rmse.1],
+                "kept": r.kept,
+            });
+            entry[fitted_as] = fitted.into();
+            entry["note"] = serde_json::json!(r.note);
+            (r.row.to_string(), entry)
+        })
+        .collect();
+    serde_json::json!({
+        "horizon": options.horizon,
+        "stride": options.stride,
+        "horizon_s": HORIZON_S,
+        "stride_s": STRIDE_S,
+        "max_windows": options.max_windows,
+        "min_gain": options.min_gain,
+        "loops": loops,
+    })
+}
+
 impl LoopRefinement {
     /// One line for the command's output.
     pub fn line(&self) -> String {

@@ -620,31 +620,7 @@ impl PdRefinement {
     /// `provenance.loop_refinement`: SINDy's record ([`crate::identify::loop_refine`]), the
     /// equation-error fit's ξ of each loop under `equation_error_fit`.
     pub fn record(&self) -> serde_json::Value {
-        let loops: serde_json::Map<String, serde_json::Value> = self
-            .loops
-            .iter()
-            .map(|r| {
-                (
-                    r.row.to_string(),
-                    serde_json::json!({
-                        "judged_by": r.output,
-                        "held_out_free_run_rmse": [r.held_out_rmse.0, r.held_out_rmse.1],
-                        "kept": r.kept,
-                        "equation_error_fit": r.terms.iter().map(|(t, a, _)| (t.clone(), serde_json::json!(a))).collect::<serde_json::Map<_, _>>(),
-                        "note": r.note,
-                    }),
-                )
-            })
-            .collect();
-        serde_json::json!({
-            "horizon": self.options.horizon,
-            "stride": self.options.stride,
-            "horizon_s": crate::identify::loop_refine::HORIZON_S,
-            "stride_s": crate::identify::loop_refine::STRIDE_S,
-            "max_windows": self.options.max_windows,
-            "min_gain": self.options.min_gain,
-            "loops": loops,
-        })
+        crate::identify::loop_refine::record(&self.options, &self.loops, "equation_error_fit")
     }
 }
 

@@ -4,7 +4,7 @@
 
 use super::{output, round_s, sindy_fit, stage, IdentifyOptions, Method, OptimizerChoice, Report};
 use crate::evaluate::{horizon_score, EvaluateOptions};
-use crate::identify::dataset::{build, DatasetOptions, Targets};
+use crate::identify::dataset::{build, Dataset, DatasetOptions, Targets};
 use crate::identify::excitation::Excitation;
 use crate::identify::horizon_delay::{self, HeldOut, RefineOptions};
 use crate::identify::loop_refine;
@@ -254,6 +254,21 @@ fn refine_delays(
     refined
 }
 
+/// The data set a candidate is fitted on: `logs` with the input response `r` (`None` if it cannot
+/// be built).
+fn candidate_dataset(logs: &[FlightLog], r: &InputResponse, savgol: SavGol, targets: Targets) -> Option<Dataset> {
+    build(
+        logs,
+        &DatasetOptions {
+            savgol,
+            response: Some(*r),
+            targets,
+            ..DatasetOptions::default()
+        },
+    )
+    .ok()
+}
+
 /// The SINDy file `identify` would fit on `logs` with the input response `r` (as
 /// [`candidate_model`], before its corrections are attached).
 fn candidate_sindy(
@@ -264,16 +279,7 @@ fn candidate_sindy(
     targets: Targets,
     ex: &Excitation,
 ) -> Option<crate::model::SindyFile> {
-    let dataset = build(
-        logs,
-        &DatasetOptions {
-            savgol,
-            response: Some(*r),
-            targets,
-            ..DatasetOptions::default()
-        },
-    )
-    .ok()?;
+    let dataset = candidate_dataset(logs, r, savgol, targets)?;
     let alpha = options.alpha.unwrap_or(RIDGE_LADDER[0]);
     let sindy_options = sindy_fit::sindy_options(options, alpha, sindy_fit::sweep(options), ex);
     let fit = sindy::fit_with_progress(
@@ -310,16 +316,7 @@ fn refit_rows(
     if rows.is_empty() {
         return Some(out);
     }
-    let dataset = build(
-        logs,
-        &DatasetOptions {
-            savgol,
-            response: Some(*r),
-            targets,
-            ..DatasetOptions::default()
-        },
-    )
-    .ok()?;
+    let dataset = candidate_dataset(logs, r, savgol, targets)?;
     let vars: Vec<String> = DEFAULT_STATES
         .iter()
         .chain(DEFAULT_INPUTS.iter())
@@ -383,16 +380,7 @@ fn candidate_model(
     let file = match options.method {
         Method::Sindy => serde_json::to_string(&candidate_sindy(options, logs, r, savgol, targets, ex)?).ok()?,
         Method::Pd => {
-            let dataset = build(
-                logs,
-                &DatasetOptions {
-                    savgol,
-                    response: Some(*r),
-                    targets,
-                    ..DatasetOptions::default()
-                },
-            )
-            .ok()?;
+            let dataset = candidate_dataset(logs, r, savgol, targets)?;
             let fit = pd::fit(
                 &dataset,
                 &options.pd_options(ex).ok()?,

@@ -221,30 +221,7 @@ pub(super) fn refine_loops(
     for r in &loops_report {
         report.line(&format!("  {}", r.line()));
     }
-    let loops: serde_json::Map<String, serde_json::Value> = loops_report
-        .iter()
-        .map(|r| {
-            (
-                r.row.to_string(),
-                serde_json::json!({
-                    "judged_by": r.output,
-                    "held_out_free_run_rmse": [r.held_out_rmse.0, r.held_out_rmse.1],
-                    "kept": r.kept,
-                    "sparse_fit": r.terms.iter().map(|(t, a, _)| (t.clone(), serde_json::json!(a))).collect::<serde_json::Map<_, _>>(),
-                    "note": r.note,
-                }),
-            )
-        })
-        .collect();
-    let record = serde_json::json!({
-        "horizon": refine.horizon,
-        "stride": refine.stride,
-        "horizon_s": loop_refine::HORIZON_S,
-        "stride_s": loop_refine::STRIDE_S,
-        "max_windows": refine.max_windows,
-        "min_gain": refine.min_gain,
-        "loops": loops,
-    });
+    let record = loop_refine::record(&refine, &loops_report, "sparse_fit");
     let text = |mut f: crate::model::SindyFile, record: serde_json::Value| -> Result<String, String> {
         if let serde_json::Value::Object(p) = &mut f.provenance {
             p.insert("loop_refinement".into(), record);
