@@ -847,55 +847,77 @@ pub(crate) fn held_out_verdict(scores: &[(f64, f64, usize)], min_gain: f64) -> (
     ((rms(before), rms(after)), why)
 }
 
+/// Test data shared by the SINDy and PD loop refinements' tests.
 #[cfg(test)]
-mod tests {
-    use super::*;
+pub(crate) mod fixtures {
+    use super::super::dataset::{Dataset, SegmentData};
 
-    /// A data set from a known roll loop: ṙ = −ω²(φ − K u) − 2ζω r, sampled from a fine Euler
-    /// integration (the refinement's single RK4 step per sample is within 2 % of its coefficients).
-    fn roll_data(wn: f64, zeta: f64, gain: f64, noise: f64, logs: usize) -> Dataset {
+    /// Integral-form data of a known roll loop, ṙ = −ω²(φ − K u) − 2ζω r (pitch and heading still),
+    /// 30 Hz, `logs` segments of 300 samples with u_roll stepping every 2/3 s, from an Euler
+    /// integration of `substeps` steps per sample; the logged roll and roll rate with uniform noise
+    /// of ±`noise`/2 and ±5 `noise` (a fixed LCG from `seed`).
+    pub(crate) fn roll_loop_data(
+        wn: f64,
+        zeta: f64,
+        gain: f64,
+        noise: f64,
+        logs: usize,
+        seed: u64,
+        substeps: usize,
+    ) -> Dataset {
         let dt = 1.0 / 30.0;
-        let mut segments = Vec::new();
-        let mut seed = 7u64;
+        let mut seed = seed;
         let mut rnd = || {
             seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
         };
-        for log in 0..logs {
-            let n = 300;
-            let mut x = vec![[0.0; 12]; n + 1];
-            let mut u = vec![[0.0; 4]; n];
-            let (mut phi, mut r) = (0.0, 0.0);
-            for k in 0..n {
-                u[k][1] = 0.3 * (((k / 20 + log) % 3) as f64 - 1.0);
-                x[k][3] = phi;
-                x[k][9] = r;
-                for _ in 0..20 {
-                    let h = dt / 20.0;
-                    let acc = -wn * wn * (phi - gain * u[k][1]) - 2.0 * zeta * wn * r;
-                    phi += h * r;
-                    r += h * acc;
+        let segments = (0..logs)
+            .map(|log| {
+                let n = 300;
+                let mut x = vec![[0.0; 12]; n + 1];
+                let mut u = vec![[0.0; 4]; n];
+                let (mut phi, mut r) = (0.0, 0.0);
+                for k in 0..n {
+                    u[k][1] = 0.3 * (((k / 20 + log) % 3) as f64 - 1.0);
+                    x[k][3] = phi;
+                    x[k][9] = r;
+                    for _ in 0..substeps {
+                        let h = dt / substeps as f64;
+                        let acc = -wn * wn * (phi - gain * u[k][1]) - 2.0 * zeta * wn * r;
+                        phi += h * r;
+                        r += h * acc;
+                    }
                 }
-            }
-            x[n][3] = phi;
-            x[n][9] = r;
-            let mut xs: Vec<[f64; 12]> = x.clone();
-            for s in xs.iter_mut() {
-                s[3] += noise * rnd();
-                s[9] += 10.0 * noise * rnd();
-            }
-            segments.push(SegmentData {
-                log,
-                segment: 0,
-                dt,
-                t: (0..n).map(|k| k as f64 * dt).collect(),
-                x: xs[..n].to_vec(),
-                u,
-                dx: vec![[0.0; 12]; n],
-                x_next: xs[1..].to_vec(),
-            });
-        }
+                x[n][3] = phi;
+                x[n][9] = r;
+                for s in x.iter_mut() {
+                    s[3] += noise * rnd();
+                    s[9] += 10.0 * noise * rnd();
+                }
+                SegmentData {
+                    log,
+                    segment: 0,
+                    dt,
+                    t: (0..n).map(|k| k as f64 * dt).collect(),
+                    x: x[..n].to_vec(),
+                    u,
+                    dx: vec![[0.0; 12]; n],
+                    x_next: x[1..].to_vec(),
+                }
+            })
+            .collect();
         Dataset { segments }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A data set from a known roll loop ([`fixtures::roll_loop_data`]; 20 Euler substeps: the
+    /// refinement's single RK4 step per sample is within 2 % of its coefficients).
+    fn roll_data(wn: f64, zeta: f64, gain: f64, noise: f64, logs: usize) -> Dataset {
+        super::fixtures::roll_loop_data(wn, zeta, gain, noise, logs, 7, 20)
     }
 
     /// Every coefficient within `tol` (relative) of `want`'s.

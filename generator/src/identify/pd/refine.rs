@@ -493,48 +493,7 @@ mod tests {
     /// stepping every 2/3 s, from a fine Euler integration; the logged roll and roll rate with
     /// uniform noise of ±`noise`/2 and ±5 `noise`.
     fn roll_data(wn: f64, zeta: f64, gain: f64, noise: f64, logs: usize) -> Dataset {
-        let dt = 1.0 / 30.0;
-        let mut seed = 11u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
-        let segments = (0..logs)
-            .map(|log| {
-                let n = 300;
-                let mut x = vec![[0.0; 12]; n + 1];
-                let mut u = vec![[0.0; 4]; n];
-                let (mut phi, mut r) = (0.0, 0.0);
-                for k in 0..n {
-                    u[k][1] = 0.3 * (((k / 20 + log) % 3) as f64 - 1.0);
-                    x[k][3] = phi;
-                    x[k][9] = r;
-                    for _ in 0..40 {
-                        let h = dt / 40.0;
-                        let acc = -wn * wn * (phi - gain * u[k][1]) - 2.0 * zeta * wn * r;
-                        phi += h * r;
-                        r += h * acc;
-                    }
-                }
-                x[n][3] = phi;
-                x[n][9] = r;
-                for s in x.iter_mut() {
-                    s[3] += noise * rnd();
-                    s[9] += 10.0 * noise * rnd();
-                }
-                SegmentData {
-                    log,
-                    segment: 0,
-                    dt,
-                    t: (0..n).map(|k| k as f64 * dt).collect(),
-                    x: x[..n].to_vec(),
-                    u,
-                    dx: vec![[0.0; 12]; n],
-                    x_next: x[1..].to_vec(),
-                }
-            })
-            .collect();
-        Dataset { segments }
+        crate::identify::loop_refine::fixtures::roll_loop_data(wn, zeta, gain, noise, logs, 11, 40)
     }
 
     /// (ω_n, ζ, static gain) of the roll loop of `xi`.
